@@ -1,0 +1,142 @@
+//! Typed errors. Library code returns these; it does not panic on user input.
+
+use thiserror::Error;
+
+/// A scheme id or coefficient set that cannot be built.
+#[derive(Clone, Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum SchemeError {
+    /// The id is not one of `midpoint`, `trapezoid`, `alpha(<value>)`, `lobatto<s>`.
+    #[error("unknown scheme `{0}` (expected midpoint, trapezoid, alpha(<0..1>) or lobatto<s>)")]
+    Unknown(String),
+    /// Lobatto needs at least two control points.
+    #[error("lobatto needs s >= 2 stages, got {0}")]
+    TooFewStages(usize),
+    /// The α-rule needs `0 ≤ α ≤ 1`.
+    #[error("alpha must be a finite number in [0, 1], got {0}")]
+    AlphaOutOfRange(f64),
+}
+
+/// Why a Newton solve failed; the integrator adds the step and the time.
+#[derive(Clone, Copy, Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum NewtonFailure {
+    /// The iteration cap was reached.
+    #[error("no convergence within the iteration cap (residual {residual:.3e})")]
+    MaxIterations {
+        /// Max-norm of the last residual.
+        residual: f64,
+    },
+    /// The residual kept growing.
+    #[error("diverged (residual {residual:.3e})")]
+    Diverged {
+        /// Max-norm of the last residual.
+        residual: f64,
+    },
+    /// The line search could not reduce the residual.
+    #[error("stagnated: no step reduces the residual {residual:.3e}")]
+    Stagnated {
+        /// Max-norm of the residual where it stalled.
+        residual: f64,
+    },
+    /// The Jacobian is singular to working precision.
+    #[error("singular Jacobian")]
+    SingularJacobian,
+    /// The residual or Jacobian contained NaN or infinity.
+    #[error("non-finite residual or Jacobian")]
+    NonFinite,
+}
+
+impl NewtonFailure {
+    /// A short, stable name for reports (`max_iterations`, `diverged`, ...).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            NewtonFailure::MaxIterations { .. } => "max_iterations",
+            NewtonFailure::Diverged { .. } => "diverged",
+            NewtonFailure::Stagnated { .. } => "stagnated",
+            NewtonFailure::SingularJacobian => "singular_jacobian",
+            NewtonFailure::NonFinite => "non_finite",
+        }
+    }
+}
+
+/// An integration that could not start or could not go on.
+#[derive(Clone, Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum Error {
+    /// The step size is not a positive finite number.
+    #[error("step size h = {h} must be positive and finite")]
+    InvalidStepSize {
+        /// The rejected step size.
+        h: f64,
+    },
+    /// The final time is negative or not finite.
+    #[error("final time {t_final} must be finite and non-negative")]
+    InvalidFinalTime {
+        /// The rejected final time.
+        t_final: f64,
+    },
+    /// A model parameter is NaN or infinite.
+    #[error("model parameter `{name}` is not finite")]
+    NonFiniteParameter {
+        /// The parameter's name.
+        name: &'static str,
+    },
+    /// The initial data contain NaN or infinity.
+    #[error("initial {what}[{index}] is not finite")]
+    NonFiniteInitialData {
+        /// `q`, `v` or `p`.
+        what: &'static str,
+        /// The component.
+        index: usize,
+    },
+    /// The mass matrix `∂²L/∂v²` is singular or nearly so: `L` is degenerate there.
+    #[error("mass matrix is singular or nearly so at step {step}, t = {t} (reciprocal condition {rcond:.3e})")]
+    SingularMassMatrix {
+        /// The step (0 for the initial data).
+        step: usize,
+        /// The time.
+        t: f64,
+        /// Estimated reciprocal condition number.
+        rcond: f64,
+    },
+    /// The Lagrangian or the force returned NaN or infinity.
+    #[error("model returned a non-finite value at step {step}, t = {t}")]
+    NonFiniteModel {
+        /// The step being computed.
+        step: usize,
+        /// Its start time.
+        t: f64,
+    },
+    /// The Newton solve of a step failed (after any subdivisions).
+    #[error("newton failed at step {step}, t = {t}: {failure}")]
+    NewtonFailed {
+        /// The step being computed (1-based: step k goes from t_{k−1} to t_k).
+        step: usize,
+        /// Its start time.
+        t: f64,
+        /// Max-norm of the last residual, if one was computed.
+        residual: f64,
+        /// What went wrong.
+        failure: NewtonFailure,
+    },
+    /// A scheme could not be built.
+    #[error(transparent)]
+    Scheme(#[from] SchemeError),
+}
+
+impl Error {
+    /// A short, stable name for reports (`newton_diverged`, `singular_mass_matrix`, ...).
+    pub fn kind(&self) -> String {
+        match self {
+            Error::InvalidStepSize { .. } => "invalid_step_size".into(),
+            Error::InvalidFinalTime { .. } => "invalid_final_time".into(),
+            Error::NonFiniteParameter { .. } => "non_finite_parameter".into(),
+            Error::NonFiniteInitialData { .. } => "non_finite_initial_data".into(),
+            Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
+            Error::NonFiniteModel { .. } => "non_finite_model".into(),
+            Error::NewtonFailed { failure, .. } => format!("newton_{}", failure.kind()),
+            Error::Scheme(_) => "invalid_scheme".into(),
+        }
+    }
+}

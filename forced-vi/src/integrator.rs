@@ -1,0 +1,794 @@
+//! The stepping loop: one residual/Jacobian assembly shared by every scheme (DESIGN §3),
+//! solved each step by the shared [`Newton`] solver.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use crate::error::{Error, NewtonFailure};
+use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
+use crate::newton::{Newton, NewtonOptions, NonlinearSystem};
+use crate::scheme::Scheme;
+
+/// Initial data: `(q₀, v₀)` as in the paper, or `(q₀, p₀)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InitialState<const N: usize> {
+    /// Position and velocity; the momentum is `p₀ = L_v(q₀, v₀)`.
+    Velocity {
+        /// `q₀`.
+        q: [f64; N],
+        /// `v₀`.
+        v: [f64; N],
+    },
+    /// Position and momentum; the velocity solves `L_v(q₀, v₀) = p₀`.
+    Momentum {
+        /// `q₀`.
+        q: [f64; N],
+        /// `p₀`.
+        p: [f64; N],
+    },
+}
+
+impl<const N: usize> InitialState<N> {
+    /// `(q₀, v₀)`.
+    pub fn from_velocity(q: [f64; N], v: [f64; N]) -> Self {
+        InitialState::Velocity { q, v }
+    }
+    /// `(q₀, p₀)`.
+    pub fn from_momentum(q: [f64; N], p: [f64; N]) -> Self {
+        InitialState::Momentum { q, p }
+    }
+}
+
+/// The state after one step, with its diagnostics (DESIGN §4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepRecord<const N: usize> {
+    /// Step index; 0 is the initial state.
+    pub step: usize,
+    /// Time `t_k`.
+    pub t: f64,
+    /// Positions `q_k`.
+    pub q: SVector<f64, N>,
+    /// Momenta `p_k`.
+    pub p: SVector<f64, N>,
+    /// Velocities, solving `L_v(q_k, v_k) = p_k`.
+    pub v: SVector<f64, N>,
+    /// Energy `v · L_v − L`.
+    pub energy: f64,
+    /// Energy-balance error `E(t_k) − E(0) − W_k`, with `W_k` the work of the force summed with
+    /// the scheme's own quadrature.
+    pub energy_balance: f64,
+    /// Newton iterations (linear solves) this step took, over all attempts.
+    pub newton_iterations: usize,
+    /// Max-norm of the final Newton residual.
+    pub residual: f64,
+    /// Substeps used: 1 normally, 2, 4, … when the step was subdivided to recover.
+    pub substeps: usize,
+}
+
+/// Totals over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunStats {
+    /// Steps completed.
+    pub steps: usize,
+    /// Newton iterations over all steps.
+    pub newton_iterations: usize,
+    /// Steps that needed subdivision.
+    pub subdivided_steps: usize,
+    /// Largest Newton iteration count of one step.
+    pub max_newton_iterations: usize,
+}
+
+/// A finished run: every record, initial state first.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory<const N: usize> {
+    /// The records, `records[0]` being the initial state.
+    pub records: Vec<StepRecord<N>>,
+    /// Totals.
+    pub stats: RunStats,
+}
+
+impl<const N: usize> Trajectory<N> {
+    /// The last record, if any.
+    pub fn last(&self) -> Option<&StepRecord<N>> {
+        self.records.last()
+    }
+}
+
+/// A run that stopped early: the error and everything computed before it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{error} ({} records kept)", trajectory.records.len())]
+pub struct RunFailure<const N: usize> {
+    /// What stopped the run.
+    #[source]
+    pub error: Error,
+    /// The records up to the failure.
+    pub trajectory: Trajectory<N>,
+}
+
+/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[non_exhaustive]
+pub struct StepOptions {
+    /// The Newton solver's options.
+    pub newton: NewtonOptions,
+    /// A failed step is retried as 2, 4, …, `2^max_subdivisions` substeps (default 0: off).
+    pub max_subdivisions: u32,
+}
+
+/// A fixed-step variational integrator for one model and one scheme.
+///
+/// ```
+/// use forced_vi::prelude::*;
+///
+/// struct Oscillator;
+/// impl ForcedLagrangian<1> for Oscillator {
+///     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+///         (v[0] * v[0] - q[0] * q[0]) * 0.5
+///     }
+/// }
+///
+/// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?
+///     .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+///     .map_err(|f| f.error)?;
+/// let end = run.last().unwrap();
+/// assert!((end.q[0] - 1f64.cos()).abs() < 1e-9);
+/// # Ok::<(), forced_vi::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Integrator<'m, M, const N: usize> {
+    model: &'m M,
+    scheme: Scheme,
+    h: f64,
+    options: StepOptions,
+}
+
+impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
+    /// An integrator with step `h`. Defaults: [`StepOptions::default`].
+    ///
+    /// Fails if `h` is not positive and finite or a model parameter is not finite.
+    pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(Error::InvalidStepSize { h });
+        }
+        model
+            .check_parameters()
+            .map_err(|name| Error::NonFiniteParameter { name })?;
+        Ok(Integrator {
+            model,
+            scheme,
+            h,
+            options: StepOptions::default(),
+        })
+    }
+
+    /// Replaces the Newton options.
+    #[must_use]
+    pub fn newton(mut self, newton: NewtonOptions) -> Self {
+        self.options.newton = newton;
+        self
+    }
+
+    /// Allows a failed step to be retried as up to `2^levels` substeps.
+    #[must_use]
+    pub fn max_subdivisions(mut self, levels: u32) -> Self {
+        self.options.max_subdivisions = levels;
+        self
+    }
+
+    /// The scheme.
+    pub fn scheme(&self) -> &Scheme {
+        &self.scheme
+    }
+
+    /// The step size.
+    pub fn step_size(&self) -> f64 {
+        self.h
+    }
+
+    /// A streaming stepper from `init` to `t_final`: an iterator of records, initial state
+    /// first, that holds only the current state.
+    pub fn stepper(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<Stepper<'_, M, N>, Error> {
+        Stepper::new(self, init, t_final)
+    }
+
+    /// Streams every record to `f` and returns the totals. Memory use does not grow with
+    /// the number of steps.
+    pub fn for_each_step(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+        mut f: impl FnMut(&StepRecord<N>),
+    ) -> Result<RunStats, Error> {
+        let mut stepper = self.stepper(init, t_final)?;
+        for rec in stepper.by_ref() {
+            f(&rec?);
+        }
+        Ok(stepper.stats())
+    }
+
+    /// Runs to `t_final` and collects every record. On failure the records computed so far
+    /// come back with the error.
+    pub fn run(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<Trajectory<N>, RunFailure<N>> {
+        let mut traj = Trajectory::default();
+        let mut stepper = match self.stepper(init, t_final) {
+            Ok(s) => s,
+            Err(error) => {
+                return Err(RunFailure {
+                    error,
+                    trajectory: traj,
+                })
+            }
+        };
+        traj.records.reserve(stepper.total_steps() + 1);
+        for rec in stepper.by_ref() {
+            match rec {
+                Ok(r) => traj.records.push(r),
+                Err(error) => {
+                    traj.stats = stepper.stats();
+                    return Err(RunFailure {
+                        error,
+                        trajectory: traj,
+                    });
+                }
+            }
+        }
+        traj.stats = stepper.stats();
+        Ok(traj)
+    }
+}
+
+/// Compensated (Kahan) accumulation of a vector.
+#[derive(Clone, Copy, Debug)]
+struct Kahan<const N: usize> {
+    sum: SVector<f64, N>,
+    comp: SVector<f64, N>,
+}
+
+impl<const N: usize> Kahan<N> {
+    fn new(x: SVector<f64, N>) -> Self {
+        Kahan {
+            sum: x,
+            comp: SVector::zeros(),
+        }
+    }
+    fn add(&mut self, dx: &SVector<f64, N>) {
+        for i in 0..N {
+            let y = dx[i] - self.comp[i];
+            let t = self.sum[i] + y;
+            self.comp[i] = (t - self.sum[i]) - y;
+            self.sum[i] = t;
+        }
+    }
+}
+
+/// The nonlinear system of one step, in the increments `Z_j = x_j − q_k` (DESIGN §3).
+struct StepProblem<'a, M, const N: usize> {
+    model: &'a M,
+    scheme: &'a Scheme,
+    h: f64,
+    q0: SVector<f64, N>,
+    p0: SVector<f64, N>,
+    xs: Vec<SVector<f64, N>>,
+    vs: Vec<SVector<f64, N>>,
+    grads: Vec<NodeGradient<N>>,
+    jacs: Vec<NodeJacobian<N>>,
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
+    fn nodes(&mut self, z: &DVector<f64>) {
+        let s = self.scheme.stages();
+        for i in 0..self.scheme.quadrature_nodes() {
+            let mut x = self.q0;
+            let mut v = SVector::<f64, N>::zeros();
+            for j in 1..s {
+                let zj = z.fixed_rows::<N>((j - 1) * N);
+                let (phi, psi) = (self.scheme.phi(i, j), self.scheme.psi(i, j));
+                if phi != 0.0 {
+                    x.axpy(phi, &zj, 1.0);
+                }
+                v.axpy(psi, &zj, 1.0);
+            }
+            self.xs[i] = x;
+            self.vs[i] = v / self.h;
+        }
+    }
+}
+
+fn all_finite<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> bool {
+    m.iter().all(|x| x.is_finite())
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        let (sch, h) = (self.scheme, self.h);
+        for i in 0..sch.quadrature_nodes() {
+            let g = self.model.node_gradient(&self.xs[i], &self.vs[i]);
+            if !(all_finite(&g.fq) && all_finite(&g.lv)) {
+                return Err(NewtonFailure::NonFinite);
+            }
+            self.grads[i] = g;
+        }
+        for j in 0..sch.stages() - 1 {
+            let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
+            for (i, g) in self.grads.iter().enumerate() {
+                let bi = sch.b()[i];
+                gj.axpy(bi * h * sch.phi(i, j), &g.fq, 1.0);
+                gj.axpy(bi * sch.psi(i, j), &g.lv, 1.0);
+            }
+            r.fixed_rows_mut::<N>(j * N).copy_from(&gj);
+        }
+        Ok(())
+    }
+
+    fn jacobian(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        let (sch, h) = (self.scheme, self.h);
+        for i in 0..sch.quadrature_nodes() {
+            let nj = self.model.node_jacobian(&self.xs[i], &self.vs[i]);
+            if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e))
+            {
+                return Err(NewtonFailure::NonFinite);
+            }
+            self.jacs[i] = nj;
+        }
+        let constant_mass = M::STRUCTURE.constant_mass;
+        let s = sch.stages();
+        jac.fill(0.0);
+        // ∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i + Ψ_ij Ψ_im E_i / h]
+        for (i, nj) in self.jacs.iter().enumerate() {
+            let bi = sch.b()[i];
+            for j in 0..s - 1 {
+                let (phj, psj) = (sch.phi(i, j), sch.psi(i, j));
+                for m in 1..s {
+                    let (phm, psm) = (sch.phi(i, m), sch.psi(i, m));
+                    let mut blk = jac.fixed_view_mut::<N, N>(j * N, (m - 1) * N);
+                    let ca = bi * h * phj * phm;
+                    if ca != 0.0 {
+                        blk += nj.a * ca;
+                    }
+                    let cb = bi * phj * psm;
+                    if cb != 0.0 {
+                        blk += nj.b * cb;
+                    }
+                    let cc = bi * psj * phm;
+                    if cc != 0.0 && !constant_mass {
+                        blk += nj.c * cc;
+                    }
+                    blk += nj.e * (bi * psj * psm / h);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Saved state for retrying a step as substeps.
+#[derive(Clone, Copy, Debug)]
+struct Snapshot<const N: usize> {
+    q: Kahan<N>,
+    p: Kahan<N>,
+    work: (f64, f64),
+    v: SVector<f64, N>,
+    has_prev: bool,
+    h_prev: f64,
+    scale_f: f64,
+}
+
+/// Steps a model through time; an iterator over [`StepRecord`]s, initial state first.
+///
+/// After an error the iterator yields that error once and then ends.
+pub struct Stepper<'a, M, const N: usize> {
+    prob: StepProblem<'a, M, N>,
+    newton: Newton,
+    options: StepOptions,
+    h: f64,
+    t_final: f64,
+    n_steps: usize,
+    k: usize,
+    q: Kahan<N>,
+    p: Kahan<N>,
+    v: SVector<f64, N>,
+    energy0: f64,
+    work: (f64, f64),
+    z: DVector<f64>,
+    z_prev: Vec<SVector<f64, N>>,
+    z_saved: Vec<SVector<f64, N>>,
+    has_prev: bool,
+    h_prev: f64,
+    scale_f: f64,
+    stats: RunStats,
+    started: bool,
+    done: bool,
+}
+
+impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
+    fn new(
+        integ: &'a Integrator<'a, M, N>,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<Self, Error> {
+        if !(t_final.is_finite() && t_final >= 0.0) {
+            return Err(Error::InvalidFinalTime { t_final });
+        }
+        let check = |what: &'static str, x: &[f64; N]| match x.iter().position(|c| !c.is_finite())
+        {
+            Some(index) => Err(Error::NonFiniteInitialData { what, index }),
+            None => Ok(()),
+        };
+        let model = integ.model;
+        let (q0, v0, p0) = match init {
+            InitialState::Velocity { q, v } => {
+                check("q", &q)?;
+                check("v", &v)?;
+                let (q, v) = (SVector::from(q), SVector::from(v));
+                let g = model.node_gradient(&q, &v);
+                if !(all_finite(&g.lv) && all_finite(&g.fq)) {
+                    return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+                }
+                mass_rcond(model, &q, &v, 0, 0.0)?;
+                (q, v, g.lv)
+            }
+            InitialState::Momentum { q, p } => {
+                check("q", &q)?;
+                check("p", &p)?;
+                let (q, p) = (SVector::from(q), SVector::from(p));
+                let v = solve_velocity(model, &q, &p, SVector::zeros(), 0, 0.0)?;
+                (q, v, p)
+            }
+        };
+        let h = integ.h;
+        let ratio = t_final / h;
+        let n_steps = if (ratio - ratio.round()).abs() <= 1e-10 * ratio.max(1.0) {
+            ratio.round() as usize
+        } else {
+            ratio.ceil() as usize
+        };
+        let scheme = &integ.scheme;
+        let s = scheme.stages();
+        let r = scheme.quadrature_nodes();
+        let energy0 = energy(model, &q0, &v0, &p0).ok_or(Error::NonFiniteModel { step: 0, t: 0.0 })?;
+        let g0 = model.node_gradient(&q0, &v0);
+        let zero_jac = NodeJacobian {
+            grad: g0,
+            a: SMatrix::zeros(),
+            b: SMatrix::zeros(),
+            c: SMatrix::zeros(),
+            e: SMatrix::zeros(),
+        };
+        Ok(Stepper {
+            prob: StepProblem {
+                model,
+                scheme,
+                h,
+                q0,
+                p0,
+                xs: vec![q0; r],
+                vs: vec![v0; r],
+                grads: vec![g0; r],
+                jacs: vec![zero_jac; r],
+            },
+            newton: Newton::new((s - 1) * N, integ.options.newton),
+            options: integ.options,
+            h,
+            t_final,
+            n_steps,
+            k: 0,
+            q: Kahan::new(q0),
+            p: Kahan::new(p0),
+            v: v0,
+            energy0,
+            work: (0.0, 0.0),
+            z: DVector::zeros((s - 1) * N),
+            z_prev: vec![SVector::zeros(); s],
+            z_saved: vec![SVector::zeros(); s],
+            has_prev: false,
+            h_prev: h,
+            scale_f: g0.fq.amax(),
+            stats: RunStats::default(),
+            started: false,
+            done: false,
+        })
+    }
+
+    /// Number of steps the run will take.
+    pub fn total_steps(&self) -> usize {
+        self.n_steps
+    }
+
+    /// Totals so far.
+    pub fn stats(&self) -> RunStats {
+        self.stats
+    }
+
+    fn time_of(&self, k: usize) -> f64 {
+        if k >= self.n_steps {
+            self.t_final
+        } else {
+            k as f64 * self.h
+        }
+    }
+
+    fn record(&self, newton_iterations: usize, residual: f64, substeps: usize) -> StepRecord<N> {
+        let (q, p, v) = (self.q.sum, self.p.sum, self.v);
+        let e = energy(self.prob.model, &q, &v, &p).unwrap_or(f64::NAN);
+        StepRecord {
+            step: self.k,
+            t: self.time_of(self.k),
+            q,
+            p,
+            v,
+            energy: e,
+            energy_balance: e - self.energy0 - self.work.0,
+            newton_iterations,
+            residual,
+            substeps,
+        }
+    }
+
+    fn snapshot(&mut self) -> Snapshot<N> {
+        self.z_saved.copy_from_slice(&self.z_prev);
+        Snapshot {
+            q: self.q,
+            p: self.p,
+            work: self.work,
+            v: self.v,
+            has_prev: self.has_prev,
+            h_prev: self.h_prev,
+            scale_f: self.scale_f,
+        }
+    }
+
+    fn restore(&mut self, s: &Snapshot<N>) {
+        self.z_prev.copy_from_slice(&self.z_saved);
+        self.q = s.q;
+        self.p = s.p;
+        self.work = s.work;
+        self.v = s.v;
+        self.has_prev = s.has_prev;
+        self.h_prev = s.h_prev;
+        self.scale_f = s.scale_f;
+    }
+
+    /// Fills `z` with the predictor: the previous step's polynomial extrapolated, or a
+    /// straight line along `v` on the first step.
+    fn predict(&mut self, h: f64) {
+        let sch = self.prob.scheme;
+        let s = sch.stages();
+        let d = sch.d();
+        for j in 1..s {
+            let zj = if self.has_prev {
+                let tau = 1.0 + d[j] * h / self.h_prev;
+                let mut x = -self.z_prev[s - 1];
+                for m in 1..s {
+                    x.axpy(sch.basis_at(tau, m), &self.z_prev[m], 1.0);
+                }
+                x
+            } else {
+                self.v * (d[j] * h)
+            };
+            self.z.fixed_rows_mut::<N>((j - 1) * N).copy_from(&zj);
+        }
+    }
+
+    /// One step of size `h` from the current state.
+    fn advance(&mut self, h: f64) -> Result<(usize, f64), NewtonFailure> {
+        self.predict(h);
+        self.prob.h = h;
+        self.prob.q0 = self.q.sum;
+        self.prob.p0 = self.p.sum;
+        self.newton.invalidate();
+        let scale = self.p.sum.amax().max(h * self.scale_f).max(f64::MIN_POSITIVE);
+        let rep = self.newton.solve(&mut self.prob, &mut self.z, scale)?;
+        // The last residual evaluation was at the accepted iterate, so the node gradients in
+        // `prob` belong to the solution. Σ_j G_j = h Σ_i b_i (L_q + F)_i gives the momentum
+        // update as a small increment, which keeps round-off low (DESIGN §3).
+        let sch = self.prob.scheme;
+        let s = sch.stages();
+        let mut dp = SVector::<f64, N>::zeros();
+        let mut dw = 0.0;
+        let mut fmax: f64 = 0.0;
+        for i in 0..sch.quadrature_nodes() {
+            let bi = sch.b()[i];
+            dp.axpy(h * bi, &self.prob.grads[i].fq, 1.0);
+            fmax = fmax.max(self.prob.grads[i].fq.amax());
+            if M::STRUCTURE.has_force {
+                let (x, v) = (self.prob.xs[i], self.prob.vs[i]);
+                let f = SVector::from(self.prob.model.force::<f64>(&x.into(), &v.into()));
+                dw += h * bi * f.dot(&v);
+            }
+        }
+        let dq: SVector<f64, N> = self.z.fixed_rows::<N>((s - 2) * N).into_owned();
+        self.q.add(&dq);
+        self.p.add(&dp);
+        let (w, c) = self.work;
+        let y = dw - c;
+        let t = w + y;
+        self.work = (t, (t - w) - y);
+        // Velocity guess: the polynomial's slope at the end of the step.
+        let mut vguess = SVector::<f64, N>::zeros();
+        for m in 1..s {
+            let zm = self.z.fixed_rows::<N>((m - 1) * N);
+            vguess.axpy(sch.basis_derivative_at(1.0, m) / h, &zm, 1.0);
+        }
+        self.z_prev[0] = SVector::zeros();
+        for m in 1..s {
+            self.z_prev[m] = self.z.fixed_rows::<N>((m - 1) * N).into_owned();
+        }
+        self.has_prev = true;
+        self.h_prev = h;
+        self.scale_f = fmax;
+        self.v = vguess;
+        Ok((rep.iterations, rep.residual))
+    }
+
+    /// Advances over `[t_k, t_{k+1}]`, subdividing on failure if allowed.
+    fn step(&mut self) -> Result<StepRecord<N>, Error> {
+        let t0 = self.time_of(self.k);
+        let h = self.time_of(self.k + 1) - t0;
+        let snap = self.snapshot();
+        let mut iters = 0;
+        let mut last_failure = None;
+        for level in 0..=self.options.max_subdivisions {
+            let parts = 1usize << level;
+            let hs = h / parts as f64;
+            let mut outcome = Ok(0.0);
+            for _ in 0..parts {
+                match self.advance(hs) {
+                    Ok((it, res)) => {
+                        iters += it;
+                        outcome = Ok(res);
+                    }
+                    Err(f) => {
+                        iters += self.newton.last_iterations();
+                        outcome = Err(f);
+                        break;
+                    }
+                }
+            }
+            match outcome {
+                Ok(res) => {
+                    self.k += 1;
+                    let t = self.time_of(self.k);
+                    self.v = solve_velocity(
+                        self.prob.model,
+                        &self.q.sum,
+                        &self.p.sum,
+                        self.v,
+                        self.k,
+                        t,
+                    )?;
+                    if parts > 1 {
+                        self.stats.subdivided_steps += 1;
+                        // The predictor's polynomial covered a substep; start afresh.
+                        self.has_prev = false;
+                    }
+                    self.stats.steps += 1;
+                    self.stats.newton_iterations += iters;
+                    self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
+                    let rec = self.record(iters, res, parts);
+                    if !(rec.energy.is_finite() && all_finite(&rec.q) && all_finite(&rec.p)) {
+                        return Err(Error::NonFiniteModel { step: self.k, t });
+                    }
+                    return Ok(rec);
+                }
+                Err(f) => {
+                    last_failure = Some(f);
+                    self.restore(&snap);
+                    // Retry without the (possibly bad) extrapolation.
+                    self.has_prev = false;
+                }
+            }
+        }
+        self.restore(&snap);
+        let failure = last_failure.unwrap_or(NewtonFailure::NonFinite);
+        let residual = match failure {
+            NewtonFailure::MaxIterations { residual }
+            | NewtonFailure::Diverged { residual }
+            | NewtonFailure::Stagnated { residual } => residual,
+            _ => f64::NAN,
+        };
+        if failure == NewtonFailure::NonFinite {
+            return Err(Error::NonFiniteModel {
+                step: self.k + 1,
+                t: t0,
+            });
+        }
+        Err(Error::NewtonFailed {
+            step: self.k + 1,
+            t: t0,
+            residual,
+            failure,
+        })
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
+    type Item = Result<StepRecord<N>, Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        if !self.started {
+            self.started = true;
+            return Some(Ok(self.record(0, 0.0, 1)));
+        }
+        if self.k >= self.n_steps {
+            self.done = true;
+            return None;
+        }
+        let out = self.step();
+        if out.is_err() {
+            self.done = true;
+        }
+        Some(out)
+    }
+}
+
+/// `E = v · p − L(q, v)` with `p = L_v`; `None` if not finite.
+fn energy<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    p: &SVector<f64, N>,
+) -> Option<f64> {
+    let e = v.dot(p) - model.lagrangian::<f64>(&(*q).into(), &(*v).into());
+    e.is_finite().then_some(e)
+}
+
+/// The reciprocal condition estimate of the mass matrix from its LU pivots; errors if it is
+/// below `1e-13`.
+fn mass_rcond<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    step: usize,
+    t: f64,
+) -> Result<SMatrix<f64, N, N>, Error> {
+    let e = model.mass_matrix(q, v);
+    if !all_finite(&e) {
+        return Err(Error::NonFiniteModel { step, t });
+    }
+    let rc = crate::newton::solve_small(&e, &SVector::<f64, N>::zeros()).map_or(0.0, |(_, rc)| rc);
+    if rc < 1e-13 {
+        return Err(Error::SingularMassMatrix { step, t, rcond: rc });
+    }
+    Ok(e)
+}
+
+/// Solves `L_v(q, v) = p` for `v` by Newton's method from `guess`; one step is exact for a
+/// kinetic energy quadratic in `v`.
+fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    p: &SVector<f64, N>,
+    guess: SVector<f64, N>,
+    step: usize,
+    t: f64,
+) -> Result<SVector<f64, N>, Error> {
+    let mut v = guess;
+    let max_iter = if M::STRUCTURE.constant_mass { 1 } else { 8 };
+    for it in 0..max_iter {
+        let lv = model.node_gradient(q, &v).lv;
+        let e = mass_rcond(model, q, &v, step, t)?;
+        let rhs = p - lv;
+        let (dv, _) = crate::newton::solve_small(&e, &rhs)
+            .ok_or(Error::SingularMassMatrix { step, t, rcond: 0.0 })?;
+        v += dv;
+        if !all_finite(&v) {
+            return Err(Error::NonFiniteModel { step, t });
+        }
+        if it > 0 && dv.amax() <= 4.0 * f64::EPSILON * v.amax() {
+            break;
+        }
+    }
+    Ok(v)
+}

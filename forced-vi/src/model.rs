@@ -1,0 +1,239 @@
+//! The model interface: what a forced Lagrangian system provides to the integrator.
+//!
+//! A model implements [`ForcedLagrangian`]: a Lagrangian `L(q, v)` and a non-conservative force
+//! `F(q, v)`, both generic over the [`Scalar`] so that num-dual can differentiate them. The
+//! integrator only ever calls the two *node kernels*, [`ForcedLagrangian::node_gradient`] and
+//! [`ForcedLagrangian::node_jacobian`], which have general dual-number defaults in
+//! [`general`]. The `#[forced_lagrangian]` macro overrides them with kernels specialised to
+//! the model's structure (DESIGN §2, "Specialise").
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::scalar::{lift, Scalar};
+
+/// Which derivative blocks a model can have; the macro fills this in from the expressions.
+///
+/// The flags are promises: `false` means the quantity is identically zero (or constant), and
+/// the runtime may skip work for it. The default, [`Structure::GENERAL`], promises nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Structure {
+    /// The model has a non-conservative force.
+    pub has_force: bool,
+    /// The force depends on the velocities (so `∂F/∂v` is not zero).
+    pub force_uses_velocity: bool,
+    /// The mass matrix `E = ∂²L/∂v²` is constant and `C = ∂²L/∂v∂q` is zero.
+    pub constant_mass: bool,
+}
+
+impl Structure {
+    /// No structural knowledge: every block is computed.
+    pub const GENERAL: Structure = Structure {
+        has_force: true,
+        force_uses_velocity: true,
+        constant_mass: false,
+    };
+}
+
+/// The physical-limit gradient of the doubled Lagrangian at one node:
+/// `∂Λ/∂q₋ = L_q + F` and `∂Λ/∂v₋ = L_v` (DESIGN §2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeGradient<const N: usize> {
+    /// `L_q(q, v) + F(q, v)`.
+    pub fq: SVector<f64, N>,
+    /// `L_v(q, v)`, the momentum.
+    pub lv: SVector<f64, N>,
+}
+
+/// The physical-limit gradient and mixed second derivative of Λ at one node.
+///
+/// `A = ∂(L_q + F)/∂q`, `B = ∂(L_q + F)/∂v`, `C = ∂L_v/∂q`, `E = ∂L_v/∂v` (the mass matrix).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeJacobian<const N: usize> {
+    /// The gradient blocks at the same node.
+    pub grad: NodeGradient<N>,
+    /// `∂(L_q + F)/∂q`.
+    pub a: SMatrix<f64, N, N>,
+    /// `∂(L_q + F)/∂v`.
+    pub b: SMatrix<f64, N, N>,
+    /// `∂L_v/∂q`.
+    pub c: SMatrix<f64, N, N>,
+    /// `∂L_v/∂v`, the mass matrix.
+    pub e: SMatrix<f64, N, N>,
+}
+
+/// A forced Lagrangian system with `N` degrees of freedom.
+///
+/// Implement [`lagrangian`](Self::lagrangian) and, for a forced system,
+/// [`force`](Self::force); everything else has a default. Usually the
+/// `#[forced_lagrangian]` macro writes this impl.
+///
+/// ```
+/// use forced_vi::prelude::*;
+///
+/// /// A damped harmonic oscillator: L = ½v² − ½kq², F = −cv.
+/// struct Damped { k: f64, c: f64 }
+///
+/// impl ForcedLagrangian<1> for Damped {
+///     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+///         v[0] * v[0] * 0.5 - q[0] * q[0] * (0.5 * self.k)
+///     }
+///     fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+///         [-v[0] * self.c]
+///     }
+/// }
+///
+/// let model = Damped { k: 1.0, c: 0.1 };
+/// let j = model.node_jacobian(&[0.5].into(), &[0.0].into());
+/// assert_eq!(j.e[(0, 0)], 1.0);   // mass
+/// assert_eq!(j.a[(0, 0)], -1.0);  // −k
+/// assert_eq!(j.b[(0, 0)], -0.1);  // −c
+/// ```
+pub trait ForcedLagrangian<const N: usize> {
+    /// What the runtime may skip; see [`Structure`].
+    const STRUCTURE: Structure = Structure::GENERAL;
+
+    /// The names of the coordinates, for reports and error messages.
+    fn coordinate_names(&self) -> [&'static str; N] {
+        ["q"; N]
+    }
+
+    /// The Lagrangian `L(q, v)`.
+    fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D;
+
+    /// The non-conservative generalised force `F(q, v)`; zero unless overridden.
+    fn force<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> [D; N] {
+        let _ = (q, v);
+        [D::from(0.0); N]
+    }
+
+    /// Checks the model's parameters; the name of the first non-finite one is the error.
+    fn check_parameters(&self) -> Result<(), &'static str> {
+        Ok(())
+    }
+
+    /// The node kernel for residuals: `(L_q + F, L_v)` at `(q, v)`.
+    fn node_gradient(&self, q: &SVector<f64, N>, v: &SVector<f64, N>) -> NodeGradient<N>
+    where
+        Self: Sized,
+    {
+        general::node_gradient(self, q, v)
+    }
+
+    /// The node kernel for Newton Jacobians: gradient plus the blocks `A, B, C, E`.
+    fn node_jacobian(&self, q: &SVector<f64, N>, v: &SVector<f64, N>) -> NodeJacobian<N>
+    where
+        Self: Sized,
+    {
+        general::node_jacobian(self, q, v)
+    }
+
+    /// The mass matrix `E = ∂²L/∂v²` at `(q, v)`.
+    fn mass_matrix(&self, q: &SVector<f64, N>, v: &SVector<f64, N>) -> SMatrix<f64, N, N>
+    where
+        Self: Sized,
+    {
+        self.node_jacobian(q, v).e
+    }
+
+    /// The energy `E = v · L_v − L` at `(q, v)`.
+    fn energy(&self, q: &SVector<f64, N>, v: &SVector<f64, N>) -> f64
+    where
+        Self: Sized,
+    {
+        let lv = self.node_gradient(q, v).lv;
+        v.dot(&lv) - self.lagrangian::<f64>(&(*q).into(), &(*v).into())
+    }
+}
+
+/// General node kernels built from num-dual's derivative drivers.
+///
+/// They need nothing but [`ForcedLagrangian::lagrangian`] and [`ForcedLagrangian::force`],
+/// and are exact (no finite differences). Cost per node: two first-order gradients of `L`
+/// for the residual; three second-order evaluations of `L` and two first-order Jacobians
+/// of `F` for the Jacobian.
+pub mod general {
+    use super::*;
+    use nalgebra::SVector;
+    use num_dual::{
+        gradient, hessian, jacobian, partial_hessian, Dual2SVec64, DualSVec64, HyperDualSVec64,
+    };
+
+    fn arr<T: Copy + nalgebra::Scalar, const N: usize>(x: &SVector<T, N>) -> [T; N] {
+        std::array::from_fn(|i| x[i])
+    }
+
+    /// `(L_q + F, L_v)` at `(q, v)`.
+    pub fn node_gradient<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        q: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+    ) -> NodeGradient<N> {
+        let (qa, va) = (arr(q), arr(v));
+        let (_, lq) = gradient(
+            |x: SVector<DualSVec64<N>, N>| m.lagrangian(&arr(&x), &lift(&va)),
+            q,
+        );
+        let (_, lv) = gradient(
+            |x: SVector<DualSVec64<N>, N>| m.lagrangian(&lift(&qa), &arr(&x)),
+            v,
+        );
+        let f = if M::STRUCTURE.has_force {
+            SVector::from(m.force::<f64>(&qa, &va))
+        } else {
+            SVector::zeros()
+        };
+        NodeGradient { fq: lq + f, lv }
+    }
+
+    /// The gradient and the blocks `A, B, C, E` at `(q, v)`.
+    pub fn node_jacobian<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        q: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+    ) -> NodeJacobian<N> {
+        let (qa, va) = (arr(q), arr(v));
+        let (_, _, lqq) = hessian(
+            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian(&arr(&x), &lift(&va)),
+            q,
+        );
+        let (_, _, lvv) = hessian(
+            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian(&lift(&qa), &arr(&x)),
+            v,
+        );
+        // One hyper-dual pass gives L_q, L_v and the mixed block L_qv.
+        let (_, lq, lv, lqv) = partial_hessian(
+            |(x, y): (
+                SVector<HyperDualSVec64<N, N>, N>,
+                SVector<HyperDualSVec64<N, N>, N>,
+            )| m.lagrangian(&arr(&x), &arr(&y)),
+            (q, v),
+        );
+        let (mut fq, mut a, mut b) = (lq, lqq, lqv);
+        if M::STRUCTURE.has_force {
+            let (f, fq_jac) = jacobian(
+                |x: SVector<DualSVec64<N>, N>| {
+                    SVector::from(m.force(&arr(&x), &lift(&va)))
+                },
+                q,
+            );
+            fq += f;
+            a += fq_jac;
+            if M::STRUCTURE.force_uses_velocity {
+                let (_, fv_jac) = jacobian(
+                    |y: SVector<DualSVec64<N>, N>| {
+                        SVector::from(m.force(&lift(&qa), &arr(&y)))
+                    },
+                    v,
+                );
+                b += fv_jac;
+            }
+        }
+        NodeJacobian {
+            grad: NodeGradient { fq, lv },
+            a,
+            b,
+            c: lqv.transpose(),
+            e: lvv,
+        }
+    }
+}

@@ -1,0 +1,397 @@
+//! A damped Newton solver for square nonlinear systems, on nalgebra.
+//!
+//! It knows nothing about time, steps or schemes: a problem is anything that implements
+//! [`NonlinearSystem`]. All buffers are made once in [`Newton::new`] and reused, so a solve
+//! does not allocate.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use crate::error::NewtonFailure;
+
+/// A square nonlinear system `R(z) = 0`.
+pub trait NonlinearSystem {
+    /// The residual at `z`. An `Err` means the residual could not be evaluated (for example,
+    /// the model returned a non-finite value).
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure>;
+
+    /// The Jacobian `∂R/∂z` at `z`.
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure>;
+}
+
+/// Options of the Newton solver. `Default` gives the values listed per field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct NewtonOptions {
+    /// Cap on iterations per solve (default 12).
+    pub max_iterations: usize,
+    /// Relative tolerance on the estimated error of `z` (default 1e-12).
+    pub rtol: f64,
+    /// Absolute tolerance on the estimated error of `z` (default 1e-15).
+    pub atol: f64,
+    /// Tolerance on the residual, relative to the caller's residual scale (default 1e-9).
+    pub residual_tol: f64,
+    /// Halvings allowed in the line search before declaring stagnation (default 10).
+    pub max_backtracks: usize,
+    /// Reuse the Jacobian's LU factors across iterations (simplified Newton) (default false).
+    pub simplified: bool,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        NewtonOptions {
+            max_iterations: 12,
+            rtol: 1e-12,
+            atol: 1e-15,
+            residual_tol: 1e-9,
+            max_backtracks: 10,
+            simplified: false,
+        }
+    }
+}
+
+/// What a successful solve reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewtonReport {
+    /// Linear solves performed.
+    pub iterations: usize,
+    /// Max-norm of the residual at the solution.
+    pub residual: f64,
+    /// Line-search halvings taken in total.
+    pub backtracks: usize,
+}
+
+/// LU with partial pivoting, in place in a buffer made once.
+///
+/// nalgebra's `LU` allocates a permutation for each factorisation of a dynamically sized
+/// matrix; the stepper factors a small matrix every iteration, so it keeps its own buffers.
+#[derive(Clone, Debug)]
+pub struct DenseLu {
+    lu: DMatrix<f64>,
+    piv: Vec<usize>,
+}
+
+impl DenseLu {
+    /// Buffers for `n × n` systems.
+    pub fn new(n: usize) -> Self {
+        DenseLu {
+            lu: DMatrix::zeros(n, n),
+            piv: vec![0; n],
+        }
+    }
+
+    /// Factors `a`. Fails if a pivot is zero or negligible against the column's scale.
+    pub fn factor(&mut self, a: &DMatrix<f64>) -> Result<(), NewtonFailure> {
+        let n = a.nrows();
+        self.lu.copy_from(a);
+        let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        if !scale.is_finite() {
+            return Err(NewtonFailure::NonFinite);
+        }
+        let tiny = scale * f64::EPSILON * 1e-3;
+        for k in 0..n {
+            let mut p = k;
+            let mut best = self.lu[(k, k)].abs();
+            for i in k + 1..n {
+                let v = self.lu[(i, k)].abs();
+                if v > best {
+                    best = v;
+                    p = i;
+                }
+            }
+            if best <= tiny || best == 0.0 {
+                return Err(NewtonFailure::SingularJacobian);
+            }
+            self.piv[k] = p;
+            if p != k {
+                self.lu.swap_rows(k, p);
+            }
+            let inv = 1.0 / self.lu[(k, k)];
+            for i in k + 1..n {
+                let l = self.lu[(i, k)] * inv;
+                self.lu[(i, k)] = l;
+                if l != 0.0 {
+                    for j in k + 1..n {
+                        let u = self.lu[(k, j)];
+                        self.lu[(i, j)] -= l * u;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Solves `A x = b` in place with the last factors.
+    pub fn solve_in_place(&self, b: &mut DVector<f64>) {
+        let n = self.piv.len();
+        for k in 0..n {
+            let p = self.piv[k];
+            if p != k {
+                b.swap_rows(k, p);
+            }
+        }
+        for i in 0..n {
+            let mut s = b[i];
+            for j in 0..i {
+                s -= self.lu[(i, j)] * b[j];
+            }
+            b[i] = s;
+        }
+        for i in (0..n).rev() {
+            let mut s = b[i];
+            for j in i + 1..n {
+                s -= self.lu[(i, j)] * b[j];
+            }
+            b[i] = s / self.lu[(i, i)];
+        }
+    }
+}
+
+/// Solves `a x = b` for a small static matrix by LU with partial pivoting, on the stack.
+///
+/// Returns `x` and a reciprocal condition estimate (smallest over largest pivot), or `None`
+/// if a pivot is exactly zero or a value is not finite. nalgebra's own LU needs typenum
+/// bounds that a generic `const N` cannot meet.
+pub fn solve_small<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    b: &SVector<f64, N>,
+) -> Option<(SVector<f64, N>, f64)> {
+    let (mut a, mut x) = (*a, *b);
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for k in 0..N {
+        let p = (k..N).max_by(|&i, &j| a[(i, k)].abs().total_cmp(&a[(j, k)].abs()))?;
+        let piv = a[(p, k)];
+        if piv == 0.0 || !piv.is_finite() {
+            return None;
+        }
+        lo = lo.min(piv.abs());
+        hi = hi.max(piv.abs());
+        a.swap_rows(k, p);
+        x.swap_rows(k, p);
+        for i in k + 1..N {
+            let l = a[(i, k)] / piv;
+            for j in k..N {
+                let u = a[(k, j)];
+                a[(i, j)] -= l * u;
+            }
+            let xk = x[k];
+            x[i] -= l * xk;
+        }
+    }
+    for i in (0..N).rev() {
+        let mut s = x[i];
+        for j in i + 1..N {
+            s -= a[(i, j)] * x[j];
+        }
+        x[i] = s / a[(i, i)];
+    }
+    Some((x, if N == 0 { 1.0 } else { lo / hi }))
+}
+
+/// The Newton solver with its reusable buffers.
+#[derive(Clone, Debug)]
+pub struct Newton {
+    opts: NewtonOptions,
+    lu: DenseLu,
+    jac: DMatrix<f64>,
+    r: DVector<f64>,
+    r_trial: DVector<f64>,
+    dz: DVector<f64>,
+    z_trial: DVector<f64>,
+    have_factors: bool,
+    last_iterations: usize,
+}
+
+fn max_norm(x: &DVector<f64>) -> f64 {
+    x.iter().fold(0.0f64, |m, v| if v.is_nan() { f64::NAN } else { m.max(v.abs()) })
+}
+
+impl Newton {
+    /// A solver for systems of `n` unknowns.
+    pub fn new(n: usize, opts: NewtonOptions) -> Self {
+        Newton {
+            opts,
+            lu: DenseLu::new(n),
+            jac: DMatrix::zeros(n, n),
+            r: DVector::zeros(n),
+            r_trial: DVector::zeros(n),
+            dz: DVector::zeros(n),
+            z_trial: DVector::zeros(n),
+            have_factors: false,
+            last_iterations: 0,
+        }
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> &NewtonOptions {
+        &self.opts
+    }
+
+    /// The residual at the last accepted iterate (valid after a successful solve).
+    pub fn residual(&self) -> &DVector<f64> {
+        &self.r
+    }
+
+    /// Linear solves done by the last call to [`Newton::solve`], converged or not.
+    pub fn last_iterations(&self) -> usize {
+        self.last_iterations
+    }
+
+    /// Forgets reusable Jacobian factors (call when the problem changes).
+    pub fn invalidate(&mut self) {
+        self.have_factors = false;
+    }
+
+    /// Solves `R(z) = 0` from the initial guess in `z`, overwriting it.
+    ///
+    /// `residual_scale` sets the units of the residual test (`|R| ≤ residual_tol · scale`).
+    /// Convergence needs both a small estimated error in `z`, from the contraction rate
+    /// `θ = |Δz_k| / |Δz_{k−1}|` as in Hairer's codes, and a small residual. A step that
+    /// does not reduce the residual is halved (line search); repeated growth is divergence.
+    pub fn solve<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        z: &mut DVector<f64>,
+        residual_scale: f64,
+    ) -> Result<NewtonReport, NewtonFailure> {
+        let o = self.opts;
+        let res_tol = o.residual_tol * residual_scale.max(f64::MIN_POSITIVE);
+        // Below this level residuals are round-off and need not decrease.
+        let res_floor = 64.0 * f64::EPSILON * residual_scale;
+        sys.residual(z, &mut self.r)?;
+        let mut rnorm = max_norm(&self.r);
+        if !rnorm.is_finite() {
+            return Err(NewtonFailure::NonFinite);
+        }
+        let mut prev_step = f64::INFINITY;
+        let mut backtracks = 0;
+        let mut growth = 0;
+        self.last_iterations = 0;
+        for it in 1..=o.max_iterations {
+            self.last_iterations = it;
+            if !(o.simplified && self.have_factors) {
+                sys.jacobian(z, &mut self.jac)?;
+                self.lu.factor(&self.jac)?;
+                self.have_factors = true;
+            }
+            self.dz.copy_from(&self.r);
+            self.lu.solve_in_place(&mut self.dz);
+            self.dz.neg_mut();
+            let full = max_norm(&self.dz);
+            if !full.is_finite() {
+                return Err(NewtonFailure::NonFinite);
+            }
+            // Line search on the residual norm.
+            let mut lambda = 1.0;
+            let mut halvings = 0;
+            let trial_norm = loop {
+                self.z_trial.copy_from(z);
+                self.z_trial.axpy(lambda, &self.dz, 1.0);
+                let ok = sys.residual(&self.z_trial, &mut self.r_trial).is_ok();
+                let tn = if ok { max_norm(&self.r_trial) } else { f64::NAN };
+                if tn.is_finite() && (tn <= rnorm * (1.0 - 1e-4 * lambda) || tn <= res_floor) {
+                    break tn;
+                }
+                // A full step that grows the residual right next to the solution is still
+                // accepted once: Newton's local convergence, not the norm, is then in charge.
+                if tn.is_finite() && halvings == 0 && full <= o.rtol * max_norm(z) + o.atol {
+                    break tn;
+                }
+                halvings += 1;
+                if halvings > o.max_backtracks {
+                    if o.simplified && self.have_factors {
+                        // Stale factors: retry this iteration with a fresh Jacobian.
+                        self.have_factors = false;
+                        break f64::NAN;
+                    }
+                    return Err(NewtonFailure::Stagnated { residual: rnorm });
+                }
+                lambda *= 0.5;
+            };
+            if trial_norm.is_nan() {
+                continue;
+            }
+            backtracks += halvings;
+            std::mem::swap(z, &mut self.z_trial);
+            std::mem::swap(&mut self.r, &mut self.r_trial);
+            let step = lambda * full;
+            let theta = step / prev_step;
+            if trial_norm > rnorm && it > 1 {
+                growth += 1;
+                if growth >= 3 {
+                    return Err(NewtonFailure::Diverged { residual: trial_norm });
+                }
+            }
+            rnorm = trial_norm;
+            prev_step = step;
+            let err_estimate = if it == 1 || !theta.is_finite() {
+                step
+            } else if theta < 1.0 {
+                step * theta / (1.0 - theta)
+            } else {
+                f64::INFINITY
+            };
+            let tol = o.rtol * max_norm(z) + o.atol;
+            if err_estimate <= tol && rnorm <= res_tol && halvings == 0 {
+                return Ok(NewtonReport {
+                    iterations: it,
+                    residual: rnorm,
+                    backtracks,
+                });
+            }
+            if o.simplified && theta.is_finite() && theta > 0.5 {
+                // Slow contraction: refresh the Jacobian.
+                self.have_factors = false;
+            }
+        }
+        Err(NewtonFailure::MaxIterations { residual: rnorm })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Cubic;
+    impl NonlinearSystem for Cubic {
+        fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+            r[0] = z[0] * z[0] * z[0] - 2.0 * z[0] - 5.0 + z[1];
+            r[1] = z[1] - 0.1 * z[0];
+            Ok(())
+        }
+        fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+            j[(0, 0)] = 3.0 * z[0] * z[0] - 2.0;
+            j[(0, 1)] = 1.0;
+            j[(1, 0)] = -0.1;
+            j[(1, 1)] = 1.0;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn converges_quadratically_and_checks_both_tests() {
+        let mut n = Newton::new(2, NewtonOptions::default());
+        let mut z = DVector::from_vec(vec![2.0, 0.0]);
+        let rep = n.solve(&mut Cubic, &mut z, 1.0).unwrap();
+        assert!(rep.iterations <= 6, "{rep:?}");
+        let mut r = DVector::zeros(2);
+        Cubic.residual(&z, &mut r).unwrap();
+        assert!(r.amax() < 1e-13);
+    }
+
+    #[test]
+    fn lu_solves_and_detects_singularity() {
+        let a = DMatrix::from_row_slice(3, 3, &[0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0]);
+        let mut lu = DenseLu::new(3);
+        lu.factor(&a).unwrap();
+        let x = DVector::from_vec(vec![1.0, -2.0, 0.5]);
+        let mut b = &a * &x;
+        lu.solve_in_place(&mut b);
+        assert!((b - x).amax() < 1e-14);
+        let s = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]);
+        assert_eq!(lu_err(&s), Some(NewtonFailure::SingularJacobian));
+    }
+
+    fn lu_err(a: &DMatrix<f64>) -> Option<NewtonFailure> {
+        DenseLu::new(a.nrows()).factor(a).err()
+    }
+}
