@@ -55,3 +55,36 @@ fn entry(
         ),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use quote::quote;
+
+    #[test]
+    fn expands_the_paper_model() {
+        let out = super::entry(
+            quote!(
+                coordinates(x, y),
+                lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot)
+                    - 0.5 * (x * x + (1.0 + rho) * y * y)
+                    - lambda * (x - y) * (x - y),
+                force(x = (eps - x * x) * x_dot, y = (eps - y * y) * y_dot),
+            ),
+            quote!(
+                struct CoupledVanDerPol {
+                    eps: f64,
+                    rho: f64,
+                    lambda: f64,
+                }
+            ),
+        )
+        .to_string();
+        if std::env::var_os("FVI_SHOW_EXPANSION").is_some() {
+            println!("{out}");
+        }
+        assert!(!out.contains("compile_error"));
+        // All of the paper's model is polynomial: no dual numbers in its kernels.
+        assert!(!out.contains("term_hessian"));
+        assert!(!out.contains("force_row"));
+    }
+}
