@@ -49,6 +49,34 @@ impl Default for NewtonOptions {
     }
 }
 
+impl NewtonOptions {
+    /// Sets the iteration cap.
+    #[must_use]
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.max_iterations = n;
+        self
+    }
+    /// Sets the relative and absolute tolerances on the solution.
+    #[must_use]
+    pub fn tolerances(mut self, rtol: f64, atol: f64) -> Self {
+        self.rtol = rtol;
+        self.atol = atol;
+        self
+    }
+    /// Sets the residual tolerance (relative to the momentum scale).
+    #[must_use]
+    pub fn residual_tol(mut self, tol: f64) -> Self {
+        self.residual_tol = tol;
+        self
+    }
+    /// Turns simplified Newton (reused LU factors) on or off.
+    #[must_use]
+    pub fn simplified(mut self, on: bool) -> Self {
+        self.simplified = on;
+        self
+    }
+}
+
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NewtonReport {
@@ -202,7 +230,10 @@ pub struct Newton {
 }
 
 fn max_norm(x: &DVector<f64>) -> f64 {
-    x.iter().fold(0.0f64, |m, v| if v.is_nan() { f64::NAN } else { m.max(v.abs()) })
+    x.iter().fold(
+        0.0f64,
+        |m, v| if v.is_nan() { f64::NAN } else { m.max(v.abs()) },
+    )
 }
 
 impl Newton {
@@ -287,7 +318,11 @@ impl Newton {
                 self.z_trial.copy_from(z);
                 self.z_trial.axpy(lambda, &self.dz, 1.0);
                 let ok = sys.residual(&self.z_trial, &mut self.r_trial).is_ok();
-                let tn = if ok { max_norm(&self.r_trial) } else { f64::NAN };
+                let tn = if ok {
+                    max_norm(&self.r_trial)
+                } else {
+                    f64::NAN
+                };
                 if tn.is_finite() && (tn <= rnorm * (1.0 - 1e-4 * lambda) || tn <= res_floor) {
                     break tn;
                 }
@@ -318,7 +353,9 @@ impl Newton {
             if trial_norm > rnorm && it > 1 {
                 growth += 1;
                 if growth >= 3 {
-                    return Err(NewtonFailure::Diverged { residual: trial_norm });
+                    return Err(NewtonFailure::Diverged {
+                        residual: trial_norm,
+                    });
                 }
             }
             rnorm = trial_norm;
@@ -353,12 +390,20 @@ mod tests {
 
     struct Cubic;
     impl NonlinearSystem for Cubic {
-        fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        fn residual(
+            &mut self,
+            z: &DVector<f64>,
+            r: &mut DVector<f64>,
+        ) -> Result<(), NewtonFailure> {
             r[0] = z[0] * z[0] * z[0] - 2.0 * z[0] - 5.0 + z[1];
             r[1] = z[1] - 0.1 * z[0];
             Ok(())
         }
-        fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        fn jacobian(
+            &mut self,
+            z: &DVector<f64>,
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), NewtonFailure> {
             j[(0, 0)] = 3.0 * z[0] * z[0] - 2.0;
             j[(0, 1)] = 1.0;
             j[(1, 0)] = -0.1;

@@ -1,0 +1,189 @@
+//! Bad input and extreme cases: `cargo test --workspace --release extreme_`.
+//!
+//! Every case must end in a typed error that names what is wrong, with the steps computed
+//! before it returned, or in a finite trajectory. Never a panic, never a NaN reported as a
+//! result.
+
+use forced_vi::prelude::*;
+use forced_vi::{Error, NewtonFailure, NewtonOptions, RunFailure};
+use forced_vi_scenes::models::CoupledVanDerPol;
+
+fn cvdp_run(h: f64, t_final: f64, init: InitialState<2>) -> Result<Trajectory<2>, RunFailure<2>> {
+    let model = CoupledVanDerPol::PAPER;
+    match Integrator::new(&model, Scheme::lobatto(3).unwrap(), h) {
+        Ok(i) => i.run(init, t_final),
+        Err(error) => Err(RunFailure { error, trajectory: Trajectory::default() }),
+    }
+}
+
+fn paper_init() -> InitialState<2> {
+    InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0])
+}
+
+#[test]
+fn extreme_bad_step_size() {
+    for h in [0.0, -0.1, f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let err = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::midpoint(), h).unwrap_err();
+        assert!(matches!(err, Error::InvalidStepSize { .. }), "{h}: {err}");
+        assert!(err.to_string().contains("step size"));
+    }
+}
+
+#[test]
+fn extreme_bad_final_time() {
+    for t in [-1.0, f64::NAN, f64::INFINITY] {
+        let f = cvdp_run(0.1, t, paper_init()).unwrap_err();
+        assert!(matches!(f.error, Error::InvalidFinalTime { .. }), "{t}: {}", f.error);
+    }
+    // Zero is a valid final time: just the initial record.
+    let run = cvdp_run(0.1, 0.0, paper_init()).unwrap();
+    assert_eq!(run.records.len(), 1);
+}
+
+#[test]
+fn extreme_non_finite_initial_data() {
+    let cases = [
+        (InitialState::from_velocity([f64::NAN, 0.0], [0.0, 0.0]), "q", 0),
+        (InitialState::from_velocity([0.0, 0.0], [0.0, f64::INFINITY]), "v", 1),
+        (InitialState::from_momentum([0.0, 0.0], [f64::NEG_INFINITY, 0.0]), "p", 0),
+    ];
+    for (init, what, index) in cases {
+        let f = cvdp_run(0.1, 1.0, init).unwrap_err();
+        assert_eq!(f.error, Error::NonFiniteInitialData { what, index });
+        assert!(f.error.to_string().contains(&format!("{what}[{index}]")));
+    }
+}
+
+#[test]
+fn extreme_non_finite_parameter() {
+    let model = CoupledVanDerPol { eps: 0.5, rho: f64::NAN, lambda: 0.8 };
+    let err = Integrator::new(&model, Scheme::midpoint(), 0.1).unwrap_err();
+    assert_eq!(err, Error::NonFiniteParameter { name: "rho" });
+    let model = CoupledVanDerPol { eps: f64::INFINITY, rho: 0.0, lambda: 0.8 };
+    let err = Integrator::new(&model, Scheme::midpoint(), 0.1).unwrap_err();
+    assert_eq!(err, Error::NonFiniteParameter { name: "eps" });
+}
+
+#[test]
+fn extreme_singular_mass_from_parameters() {
+    // M = [[1, 1], [1, 1]] makes L degenerate in v.
+    let model = TwoMasses { m: [[1.0, 1.0], [1.0, 1.0]] };
+    let f = Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.1)
+        .unwrap()
+        .run(InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]), 1.0)
+        .unwrap_err();
+    assert!(matches!(f.error, Error::SingularMassMatrix { step: 0, .. }), "{}", f.error);
+}
+
+/// `L = ½vᵀMv − ½|q|²`.
+struct TwoMasses {
+    m: [[f64; 2]; 2],
+}
+
+impl ForcedLagrangian<2> for TwoMasses {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        let mut l = (q[0] * q[0] + q[1] * q[1]) * -0.5;
+        for i in 0..2 {
+            for j in 0..2 {
+                l += v[i] * v[j] * (0.5 * self.m[i][j]);
+            }
+        }
+        l
+    }
+}
+
+/// `L = ½(a − q²)v² − ½q²`: the mass vanishes at `|q| = √a`.
+struct VanishingMass {
+    a: f64,
+}
+
+impl ForcedLagrangian<1> for VanishingMass {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (-q[0] * q[0] + self.a) * v[0] * v[0] * 0.5 - q[0] * q[0] * 0.5
+    }
+}
+
+#[test]
+fn extreme_mass_becomes_singular_mid_run() {
+    let model = VanishingMass { a: 0.25 };
+    let f = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01)
+        .unwrap()
+        .run(InitialState::from_velocity([0.0], [1.0]), 5.0)
+        .unwrap_err();
+    eprintln!("{}", f.error);
+    assert!(
+        matches!(f.error, Error::SingularMassMatrix { .. } | Error::NewtonFailed { .. }),
+        "{}",
+        f.error
+    );
+    let kept = &f.trajectory.records;
+    assert!(kept.len() > 5, "the steps before the failure are kept");
+    assert!(kept.iter().all(|r| r.q[0].abs() < 0.5 && r.energy.is_finite()));
+}
+
+/// A force that is NaN for `q > 1`.
+struct SqrtDrag;
+
+impl ForcedLagrangian<1> for SqrtDrag {
+    fn lagrangian<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> D {
+        v[0] * v[0] * 0.5
+    }
+    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * (-q[0] + 1.0).sqrt() * 0.1]
+    }
+}
+
+#[test]
+fn extreme_force_returns_nan_mid_run() {
+    let f = Integrator::new(&SqrtDrag, Scheme::lobatto(2).unwrap(), 0.01)
+        .unwrap()
+        .max_subdivisions(3)
+        .run(InitialState::from_velocity([0.0], [2.0]), 2.0)
+        .unwrap_err();
+    match f.error {
+        Error::NonFiniteModel { step, t } => {
+            assert!(step > 10 && t > 0.1, "step {step}, t {t}");
+            assert_eq!(f.trajectory.records.len(), step);
+        }
+        ref e => panic!("expected NonFiniteModel, got {e}"),
+    }
+    assert!(f.trajectory.records.iter().all(|r| r.q[0].is_finite() && r.q[0] <= 1.0));
+}
+
+#[test]
+fn extreme_newton_does_not_converge() {
+    // Two Newton iterations cannot meet a 1e-15 tolerance from a poor first-step guess.
+    let opts = NewtonOptions::default().max_iterations(1);
+    let f = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(4).unwrap(), 0.5)
+        .unwrap()
+        .newton(opts)
+        .run(paper_init(), 2.0)
+        .unwrap_err();
+    match f.error {
+        Error::NewtonFailed { step, t, residual, failure } => {
+            assert_eq!(step, 1);
+            assert_eq!(t, 0.0);
+            assert!(residual.is_finite());
+            assert!(matches!(failure, NewtonFailure::MaxIterations { .. }));
+        }
+        ref e => panic!("expected NewtonFailed, got {e}"),
+    }
+    assert_eq!(f.trajectory.records.len(), 1, "the initial record is kept");
+    let msg = f.error.to_string();
+    assert!(msg.contains("step 1") && msg.contains("t = 0"), "{msg}");
+}
+
+#[test]
+fn extreme_huge_step_is_finite_or_typed() {
+    for s in 2..=5 {
+        for h in [1.0, 2.0, 5.0] {
+            match cvdp_run(h, 20.0, paper_init()) {
+                Ok(run) => assert!(run.records.iter().all(|r| r.q.iter().all(|x| x.is_finite()))),
+                Err(f) => {
+                    assert!(f.trajectory.records.iter().all(|r| r.energy.is_finite()));
+                    eprintln!("lobatto{s} h={h}: {}", f.error);
+                }
+            }
+        }
+    }
+}
