@@ -98,6 +98,16 @@ impl Reference {
 pub fn embedded(scene: &str) -> Option<&'static str> {
     Some(match scene {
         "coupled_van_der_pol" => include_str!("../data/reference/coupled_van_der_pol.csv"),
+        "coupled_van_der_pol_ensemble" => {
+            include_str!("../data/reference/coupled_van_der_pol_ensemble.csv")
+        }
+        "damped_oscillator" => include_str!("../data/reference/damped_oscillator.csv"),
+        "double_pendulum_friction" => {
+            include_str!("../data/reference/double_pendulum_friction.csv")
+        }
+        "kepler_drag" => include_str!("../data/reference/kepler_drag.csv"),
+        "overdamped_oscillator" => include_str!("../data/reference/overdamped_oscillator.csv"),
+        "stiff_van_der_pol" => include_str!("../data/reference/stiff_van_der_pol.csv"),
         _ => return None,
     })
 }
