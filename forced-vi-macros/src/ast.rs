@@ -114,16 +114,22 @@ pub fn parse(cx: &Ctxt, args: TokenStream, item: syn::Item) -> Result<Model, syn
         lagrangian: None,
         force: None,
     };
+    let mut seen = Vec::new();
     for chunk in split_top_level_commas(args) {
+        if let Some(TokenTree::Ident(key)) = chunk.clone().into_iter().next() {
+            seen.push(key.to_string());
+        }
         parse_argument(cx, &mut model, chunk);
     }
-    if model.coordinates.is_none() {
+    // A malformed argument has its own error; do not also call it missing.
+    let seen = |key: &str| seen.iter().any(|s| s == key);
+    if model.coordinates.is_none() && !seen("coordinates") {
         cx.error_at(
             Span::call_site(),
             "missing `coordinates(...)`: name the coordinates, for example `coordinates(x, y)`",
         );
     }
-    if model.lagrangian.is_none() {
+    if model.lagrangian.is_none() && !seen("lagrangian") {
         cx.error_at(
             Span::call_site(),
             "missing `lagrangian = ...`: give the Lagrangian as an expression",

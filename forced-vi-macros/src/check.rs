@@ -345,9 +345,11 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
             None => (Some(Len::Lit(1)), false),
             Some(ty) => (array_len(cx, c, ty, const_params), true),
         };
-        let Some(len) = len else { continue };
+        // An invalid length has its error; the group still resolves its names.
+        let len =
+            len.unwrap_or_else(|| Len::Param(Ident::new("__fvi_invalid_length", c.name.span())));
         if let Len::Param(p) = &len {
-            if coords.len() != 1 {
+            if coords.len() != 1 && const_params.contains(p) {
                 cx.error_spanned_by(
                     p,
                     format!(

@@ -314,8 +314,8 @@ fn kernels(c: &Checked) -> TokenStream {
     let params = param_bindings(&c.env);
     let sig_args = quote!(&self, #qs: &#fvi::SVector<f64, #n>, #vs: &#fvi::SVector<f64, #n>);
     let prologue = quote! {
-        let #q: [f64; #n] = (*#qs).into();
-        let #v: [f64; #n] = (*#vs).into();
+        let #q: [f64; #n] = ::core::convert::Into::into(*#qs);
+        let #v: [f64; #n] = ::core::convert::Into::into(*#vs);
     };
 
     let mut grad_code = TokenStream::new();
@@ -452,8 +452,8 @@ fn kernels(c: &Checked) -> TokenStream {
     if let Some(force) = &c.force {
         grad_code.extend(quote! {
             let __fvi_f: [f64; #n] = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &#q, &#v);
-            for (__fvi_k, __fvi_fk) in __fvi_f.iter().enumerate() {
-                #g.fq[__fvi_k] += *__fvi_fk;
+            for __fvi_k in 0..#n {
+                #g.fq[__fvi_k] += __fvi_f[__fvi_k];
             }
         });
         match n {
@@ -529,8 +529,8 @@ fn kernels(c: &Checked) -> TokenStream {
                 if !force.uses_q && !force.uses_v {
                     jac_code.extend(quote! {
                         let __fvi_f: [f64; #n] = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &#q, &#v);
-                        for (__fvi_k, __fvi_fk) in __fvi_f.iter().enumerate() {
-                            #j.grad.fq[__fvi_k] += *__fvi_fk;
+                        for __fvi_k in 0..#n {
+                            #j.grad.fq[__fvi_k] += __fvi_f[__fvi_k];
                         }
                     });
                 }

@@ -55,7 +55,11 @@ fn stub_len(model: &Model) -> Option<TokenStream> {
         return None;
     }
     let mut total = 0usize;
+    let mut seen = std::collections::HashSet::new();
     for c in coords {
+        if !seen.insert(c.name.to_string()) || coords.iter().any(|o| o.velocity == c.name) {
+            continue;
+        }
         match &c.ty {
             None => total += 1,
             Some(syn::Type::Array(a)) => {

@@ -376,6 +376,12 @@ impl<'a> Lowerer<'a> {
         }
         let hint = if name == "self" {
             "; parameters are written by name, without `self.`".to_string()
+        } else if name.len() > 1
+            && name
+                .chars()
+                .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+        {
+            format!("; a constant from outside the model is written with its path, as in `self::{name}` or `crate::{name}`")
         } else if let Some(stem) = name.strip_suffix("_dot") {
             format!("; `{stem}` is not a coordinate")
         } else {

@@ -1,0 +1,10 @@
+use forced_vi::prelude::*;
+
+#[forced_lagrangian(
+    coordinates x,
+    lagrangian 0.5 * x_dot * x_dot,
+    potential = 0.5 * x * x,
+)]
+struct Oscillator {}
+
+fn main() {}

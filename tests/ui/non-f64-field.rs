@@ -1,0 +1,13 @@
+use forced_vi::prelude::*;
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * k * x * x,
+)]
+struct Oscillator {
+    k: f64,
+    steps: usize,
+    stiffness: [[f64; 2]; 2],
+}
+
+fn main() {}

@@ -1,0 +1,12 @@
+use forced_vi::prelude::*;
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = -damping * x_dot),
+)]
+struct Damped {
+    c: f64,
+}
+
+fn main() {}
