@@ -4,4 +4,7 @@
 //! share.
 #![warn(missing_docs)]
 
+pub mod baselines;
 pub mod models;
+pub mod reference;
+pub mod scenes;

@@ -1,0 +1,532 @@
+//! Report scenes: a model with its parameters, initial data, final time and reference.
+//!
+//! A scene is one registration line in [`all`]: a name, a model value (its fields are the
+//! parameters) and a one-line summary. The initial data and the final time come from the
+//! scene's reference file `data/reference/<name>.csv` (written by `scripts/reference.py` and
+//! embedded with `include_str!`): its `t = 0` rows give `(q₀, v₀)` of each member and its last
+//! row per member gives the final time and the reference state. Scene and reference therefore
+//! cannot disagree about where a run starts or ends; the model's parameters must match the
+//! script's, which the report's own convergence tables check (a mismatch shows as errors that
+//! stop shrinking).
+//!
+//! To add a scene: add the model (in [`crate::models`]), add it to `scripts/reference.py` and
+//! regenerate the references, then add one `scene!(...)` line to [`all`].
+
+use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme};
+
+use crate::baselines::{self, Baseline, BaselineError, OdeSystem};
+use crate::models::{CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, KeplerDrag};
+use crate::reference::Reference;
+
+/// The reference state of one member at the final time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinalState {
+    /// Positions.
+    pub q: Vec<f64>,
+    /// Momenta `L_v`.
+    pub p: Vec<f64>,
+    /// Energy `v · L_v − L`.
+    pub energy: f64,
+}
+
+/// The end of one run and what it cost.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outcome {
+    /// Final state.
+    pub end: FinalState,
+    /// Steps taken (accepted steps for adaptive baselines).
+    pub steps: usize,
+    /// Newton iterations (0 for explicit baselines).
+    pub newton_iterations: usize,
+}
+
+/// The energy-balance error `E(t) − E(0) − W(t)` sampled along one long run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BalanceSeries {
+    /// Sample times (step times of the method, about evenly spread).
+    pub t: Vec<f64>,
+    /// The energy-balance error at those times.
+    pub balance: Vec<f64>,
+    /// Steps taken.
+    pub steps: usize,
+    /// Newton iterations.
+    pub newton_iterations: usize,
+}
+
+/// Why a scene could not be built or run.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SceneError {
+    /// The embedded reference file does not fit the scene.
+    #[error("scene `{scene}`: bad reference data: {message}")]
+    Reference {
+        /// The scene.
+        scene: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// There is no such ensemble member.
+    #[error("scene `{scene}` has no member {member}")]
+    NoSuchMember {
+        /// The scene.
+        scene: &'static str,
+        /// The requested member.
+        member: usize,
+    },
+    /// The variational integrator stopped.
+    #[error(transparent)]
+    Variational(#[from] forced_vi::Error),
+    /// A baseline solver failed.
+    #[error(transparent)]
+    Baseline(#[from] BaselineError),
+}
+
+/// A runnable scene, with its model type and size erased.
+pub trait Scene: Send + Sync {
+    /// The scene's name (`--scene` filter, file names, CSV rows).
+    fn name(&self) -> &'static str;
+    /// The model and its parameters in one line.
+    fn summary(&self) -> &'static str;
+    /// Degrees of freedom.
+    fn dof(&self) -> usize;
+    /// Ensemble members (1 for a single trajectory).
+    fn members(&self) -> usize;
+    /// Final time.
+    fn t_final(&self) -> f64;
+    /// Initial positions and velocities of a member.
+    fn initial(&self, member: usize) -> Option<(Vec<f64>, Vec<f64>)>;
+    /// The reference state of a member at the final time.
+    fn reference(&self, member: usize) -> Option<&FinalState>;
+    /// Runs a variational scheme with step `h` to the final time (no step subdivision).
+    fn run_variational(
+        &self,
+        scheme: &Scheme,
+        h: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError>;
+    /// Runs a baseline at tolerance `tol` to the final time.
+    fn run_baseline(
+        &self,
+        solver: Baseline,
+        tol: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError>;
+    /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
+    fn balance_variational(
+        &self,
+        scheme: &Scheme,
+        h: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError>;
+    /// The same for a baseline, whose work integral is an extra ODE component.
+    fn balance_baseline(
+        &self,
+        solver: Baseline,
+        tol: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError>;
+}
+
+/// A scene built from a model with `N` degrees of freedom and its reference file.
+#[derive(Clone, Debug)]
+pub struct ModelScene<M, const N: usize> {
+    name: &'static str,
+    summary: &'static str,
+    model: M,
+    t_final: f64,
+    initial: Vec<([f64; N], [f64; N])>,
+    reference: Vec<FinalState>,
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
+    /// Builds a scene from the CSV text of its reference file (see the module docs).
+    pub fn from_reference(
+        name: &'static str,
+        summary: &'static str,
+        model: M,
+        csv: &str,
+    ) -> Result<Self, SceneError> {
+        let bad = |message: String| SceneError::Reference {
+            scene: name,
+            message,
+        };
+        let parsed = Reference::parse(csv).map_err(|e| bad(e.to_string()))?;
+        if parsed.dim != N {
+            return Err(bad(format!(
+                "{} coordinates, the model has {N}",
+                parsed.dim
+            )));
+        }
+        let mut initial = Vec::new();
+        let mut reference = Vec::new();
+        let mut t_final = None;
+        for member in 0..parsed.members() {
+            let start = parsed
+                .initial(member)
+                .ok_or_else(|| bad(format!("member {member} has no t = 0 row")))?;
+            let end = parsed
+                .points
+                .iter()
+                .filter(|p| p.member == member)
+                .max_by(|a, b| a.t.total_cmp(&b.t))
+                .ok_or_else(|| bad(format!("member {member} has no rows")))?;
+            if end.t.is_nan() || end.t <= 0.0 {
+                return Err(bad(format!("member {member} has no row with t > 0")));
+            }
+            match t_final {
+                None => t_final = Some(end.t),
+                Some(t) if t != end.t => {
+                    return Err(bad(format!("members end at {t} and {}", end.t)));
+                }
+                Some(_) => {}
+            }
+            let arr = |x: &[f64]| -> [f64; N] { std::array::from_fn(|i| x[i]) };
+            initial.push((arr(&start.q), arr(&start.v)));
+            reference.push(FinalState {
+                q: end.q.clone(),
+                p: end.p.clone(),
+                energy: end.energy,
+            });
+        }
+        let t_final = t_final.ok_or_else(|| bad("no members".to_string()))?;
+        Ok(ModelScene {
+            name,
+            summary,
+            model,
+            t_final,
+            initial,
+            reference,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    fn start(&self, member: usize) -> Result<([f64; N], [f64; N]), SceneError> {
+        self.initial
+            .get(member)
+            .copied()
+            .ok_or(SceneError::NoSuchMember {
+                scene: self.name,
+                member,
+            })
+    }
+}
+
+/// Indices of about `samples` evenly spread points: keeps a step when its time reaches the next
+/// sample time.
+struct Sampler {
+    next: f64,
+    dt: f64,
+}
+
+impl Sampler {
+    fn new(t_final: f64, samples: usize) -> Self {
+        Sampler {
+            next: 0.0,
+            dt: t_final / samples.max(1) as f64,
+        }
+    }
+    fn take(&mut self, t: f64) -> bool {
+        if t >= self.next {
+            while self.next <= t {
+                self.next += self.dt;
+            }
+            true
+        } else {
+            false
+        }
+    }
+}
+
+impl<M, const N: usize> Scene for ModelScene<M, N>
+where
+    M: ForcedLagrangian<N> + Send + Sync,
+{
+    fn name(&self) -> &'static str {
+        self.name
+    }
+    fn summary(&self) -> &'static str {
+        self.summary
+    }
+    fn dof(&self) -> usize {
+        N
+    }
+    fn members(&self) -> usize {
+        self.initial.len()
+    }
+    fn t_final(&self) -> f64 {
+        self.t_final
+    }
+    fn initial(&self, member: usize) -> Option<(Vec<f64>, Vec<f64>)> {
+        self.initial
+            .get(member)
+            .map(|(q, v)| (q.to_vec(), v.to_vec()))
+    }
+    fn reference(&self, member: usize) -> Option<&FinalState> {
+        self.reference.get(member)
+    }
+
+    fn run_variational(
+        &self,
+        scheme: &Scheme,
+        h: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError> {
+        let (q0, v0) = self.start(member)?;
+        let integ = Integrator::new(&self.model, scheme.clone(), h)?;
+        let mut last = None;
+        let stats =
+            integ.for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
+                last = Some((r.q, r.p, r.energy));
+            })?;
+        let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
+            t_final: self.t_final,
+        })?;
+        Ok(Outcome {
+            end: FinalState {
+                q: q.as_slice().to_vec(),
+                p: p.as_slice().to_vec(),
+                energy,
+            },
+            steps: stats.steps,
+            newton_iterations: stats.newton_iterations,
+        })
+    }
+
+    fn run_baseline(
+        &self,
+        solver: Baseline,
+        tol: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError> {
+        let (q0, v0) = self.start(member)?;
+        let sys = OdeSystem::new(&self.model, &q0, &v0);
+        let y0 = sys.initial_state(&q0, &v0);
+        let run = baselines::solve(&sys, solver, tol, &y0, self.t_final, |_, _| {})?;
+        let (p, energy) = sys.momentum_energy(&run.y);
+        Ok(Outcome {
+            end: FinalState {
+                q: run.y[..N].to_vec(),
+                p: p.as_slice().to_vec(),
+                energy,
+            },
+            steps: run.steps,
+            newton_iterations: run.newton_iterations,
+        })
+    }
+
+    fn balance_variational(
+        &self,
+        scheme: &Scheme,
+        h: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let integ = Integrator::new(&self.model, scheme.clone(), h)?;
+        let mut out = BalanceSeries::default();
+        let mut sampler = Sampler::new(t_final, samples);
+        let mut last = (0.0, 0.0);
+        let stats = integ.for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
+            if sampler.take(r.t) {
+                out.t.push(r.t);
+                out.balance.push(r.energy_balance);
+            }
+            last = (r.t, r.energy_balance);
+        })?;
+        if out.t.last() != Some(&last.0) {
+            out.t.push(last.0);
+            out.balance.push(last.1);
+        }
+        out.steps = stats.steps;
+        out.newton_iterations = stats.newton_iterations;
+        Ok(out)
+    }
+
+    fn balance_baseline(
+        &self,
+        solver: Baseline,
+        tol: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let sys = OdeSystem::new(&self.model, &q0, &v0).with_work();
+        let y0 = sys.initial_state(&q0, &v0);
+        let (_, e0) = sys.momentum_energy(&y0);
+        let mut out = BalanceSeries::default();
+        let mut sampler = Sampler::new(t_final, samples);
+        let balance = |y: &[f64]| sys.momentum_energy(y).1 - e0 - y[2 * N];
+        let run = baselines::solve(&sys, solver, tol, &y0, t_final, |t, y| {
+            if sampler.take(t) {
+                out.t.push(t);
+                out.balance.push(balance(y));
+            }
+        })?;
+        if out.t.last() != Some(&run.t) {
+            out.t.push(run.t);
+            out.balance.push(balance(&run.y));
+        }
+        out.steps = run.steps;
+        out.newton_iterations = run.newton_iterations;
+        Ok(out)
+    }
+}
+
+/// Registers a scene: name (also its reference file's stem), model value, summary.
+macro_rules! scene {
+    ($name:literal, $model:expr, $summary:literal) => {
+        ModelScene::from_reference(
+            $name,
+            $summary,
+            $model,
+            include_str!(concat!("../data/reference/", $name, ".csv")),
+        )
+        .map(|s| Box::new(s) as Box<dyn Scene>)
+    };
+}
+
+/// Every registered scene, in report order.
+pub fn all() -> Result<Vec<Box<dyn Scene>>, SceneError> {
+    [
+        scene!(
+            "coupled_van_der_pol",
+            CoupledVanDerPol::PAPER,
+            "Two coupled van der Pol oscillators, (ε, ρ, λ) = (0.5, 0.02, 0.8): the paper's test"
+        ),
+        scene!(
+            "coupled_van_der_pol_ensemble",
+            CoupledVanDerPol::PAPER,
+            "The paper's ensemble: 25 seeded initial positions uniform in [−4, 4]², v₀ = (0, 4)"
+        ),
+        scene!(
+            "damped_oscillator",
+            DampedOscillator::DEFAULT,
+            "Linear oscillator with full mass, stiffness and damping matrices (exact solution)"
+        ),
+        scene!(
+            "double_pendulum_friction",
+            DoublePendulumFriction::DEFAULT,
+            "Double pendulum with joint friction c = 0.05: angle-dependent mass matrix"
+        ),
+        scene!(
+            "kepler_drag",
+            KeplerDrag::DEFAULT,
+            "Kepler orbit (μ = 1) with linear drag γ = 0.01: non-polynomial potential"
+        ),
+    ]
+    .into_iter()
+    .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(name: &str) -> Box<dyn Scene> {
+        all()
+            .unwrap()
+            .into_iter()
+            .find(|s| s.name() == name)
+            .unwrap()
+    }
+
+    /// The initial data and final times the report promises (and `scripts/reference.py` uses).
+    #[test]
+    fn scenes_start_and_end_where_documented() {
+        let cases: [(&str, [f64; 2], [f64; 2], f64); 4] = [
+            ("coupled_van_der_pol", [-0.5, -0.25], [0.0, 4.0], 1.0),
+            ("damped_oscillator", [1.0, 0.0], [0.0, 0.5], 10.0),
+            ("double_pendulum_friction", [1.0, 0.5], [0.0, 0.0], 5.0),
+            ("kepler_drag", [1.0, 0.0], [0.0, 1.2], 20.0),
+        ];
+        for (name, q0, v0, t) in cases {
+            let s = scene(name);
+            assert_eq!(s.members(), 1, "{name}");
+            assert_eq!(s.initial(0).unwrap(), (q0.to_vec(), v0.to_vec()), "{name}");
+            assert_eq!(s.t_final(), t, "{name}");
+        }
+        let ens = scene("coupled_van_der_pol_ensemble");
+        assert_eq!(ens.members(), 25);
+        assert_eq!(ens.t_final(), 1.0);
+        for m in 0..25 {
+            let (q, v) = ens.initial(m).unwrap();
+            assert!(q.iter().all(|x| (-4.0..=4.0).contains(x)));
+            assert_eq!(v, vec![0.0, 4.0]);
+        }
+    }
+
+    /// The report trusts a baseline only because it converges to the references: at a tight
+    /// tolerance it agrees with every scene's reference, and tightening the tolerance from
+    /// 1e-6 to 1e-10 shrinks its error.
+    #[test]
+    fn baselines_match_the_references() {
+        for s in all().unwrap() {
+            for b in Baseline::ALL {
+                let bound = match b {
+                    Baseline::Dop853 | Baseline::Tsit45 => 1e-7,
+                    Baseline::Bdf => 1e-5,
+                    Baseline::Esdirk34 => 1e-4,
+                };
+                for m in 0..s.members().min(3) {
+                    let r = s.reference(m).unwrap();
+                    let err = |tol: f64| {
+                        let o = s.run_baseline(b, tol, m).unwrap();
+                        let dq = o.end.q.iter().zip(&r.q).map(|(a, b)| (a - b).abs());
+                        let dp = o.end.p.iter().zip(&r.p).map(|(a, b)| (a - b).abs());
+                        dq.chain(dp).fold(0.0, f64::max)
+                    };
+                    let (loose, tight) = (err(1e-6), err(1e-10));
+                    let name = s.name();
+                    assert!(
+                        tight <= bound,
+                        "{name}/{m} {b}: error {tight:e} at tol 1e-10"
+                    );
+                    assert!(
+                        tight < loose / 10.0,
+                        "{name}/{m} {b}: {loose:e} -> {tight:e}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The variational schemes converge to the same references (the report's orders rely on
+    /// it); the paper tests check this in detail for the paper's scenes.
+    #[test]
+    fn lobatto_matches_the_references() {
+        let scheme = Scheme::lobatto(4).unwrap();
+        for s in all().unwrap() {
+            let o = s.run_variational(&scheme, s.t_final() / 400.0, 0).unwrap();
+            let r = s.reference(0).unwrap();
+            let e = o.end.q.iter().zip(&r.q).map(|(a, b)| (a - b).abs());
+            let e = e.fold(0.0, f64::max);
+            assert!(e < 1e-8, "{}: {e:e}", s.name());
+        }
+    }
+
+    #[test]
+    fn scene_names_are_unique() {
+        let scenes = all().unwrap();
+        let mut names: Vec<_> = scenes.iter().map(|s| s.name()).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), scenes.len());
+    }
+
+    #[test]
+    fn sampler_spreads_points() {
+        let mut s = Sampler::new(10.0, 5);
+        let kept: Vec<f64> = (0..=100)
+            .map(|k| k as f64 * 0.1)
+            .filter(|&t| s.take(t))
+            .collect();
+        assert!((5..=6).contains(&kept.len()), "{kept:?}");
+        assert_eq!(kept[0], 0.0);
+    }
+}
