@@ -7,4 +7,5 @@
 pub mod baselines;
 pub mod models;
 pub mod reference;
+pub mod report;
 pub mod scenes;

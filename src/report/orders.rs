@@ -1,0 +1,123 @@
+//! Observed orders of convergence: slopes of `log err` against `log h`.
+//!
+//! # The rule
+//!
+//! The observed order of a method on a scene is the least-squares slope of `log err` against
+//! `log h` over the asymptotic range of its sweep, which sits just above the round-off floor:
+//!
+//! 1. **Candidates.** Points with `FLOOR · s ≤ err ≤ CEILING · s` are kept, where
+//!    `s = max(1, |x|∞)` is the size of the reference value (the positions `q`, the momenta `p`
+//!    or the energy). Below [`FLOOR`] `= 10⁻¹³` round-off bends the curve (the schemes' floors
+//!    measure 10⁻¹⁶–10⁻¹⁵ `s`); above [`CEILING`] `= 10⁻³` the leading error term need not
+//!    dominate.
+//! 2. **Seed.** The [`MIN_POINTS`] `= 3` candidates with the smallest `h` start the fit.
+//! 3. **Grow.** The next larger `h` joins while the slope of the segment from it to the fit's
+//!    largest-`h` point is within [`TRIM`] `= 0.3` of the seed's slope; the first point that
+//!    breaks this ends the asymptotic range (larger steps are pre-asymptotic). Comparing with
+//!    the seed, not the running fit, keeps a slowly bending curve from dragging the fit along.
+//!
+//! With fewer than [`MIN_POINTS`] candidates there is no observed order (an empty CSV field).
+
+/// Errors below `FLOOR · max(1, |reference|)` count as round-off.
+pub const FLOOR: f64 = 1e-13;
+/// Errors above `CEILING · max(1, |reference|)` count as pre-asymptotic.
+pub const CEILING: f64 = 1e-3;
+/// Fewest points a fit uses.
+pub const MIN_POINTS: usize = 3;
+/// A point whose segment slope is further than this from the fit ends the range.
+pub const TRIM: f64 = 0.3;
+
+/// A fitted order and the points it used.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fit {
+    /// The slope.
+    pub order: f64,
+    /// The `(h, err)` points in the fit, largest `h` first.
+    pub used: Vec<(f64, f64)>,
+}
+
+/// Least-squares slope of `log y` against `log x`; `None` for fewer than two distinct `x`.
+pub fn slope(points: &[(f64, f64)]) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = points.iter().map(|&(x, y)| (x.ln(), y.ln())).collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// Whether an error is at the round-off floor for a reference of size `scale`.
+pub fn at_floor(err: f64, scale: f64) -> bool {
+    err < FLOOR * scale.max(1.0)
+}
+
+/// The observed order of `(h, err)` points by the rule in the module docs; `scale` is
+/// `|reference|∞`.
+pub fn observed_order(points: &[(f64, f64)], scale: f64) -> Option<Fit> {
+    let s = scale.max(1.0);
+    let mut pts: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|&(h, e)| h > 0.0 && e.is_finite() && e >= FLOOR * s && e <= CEILING * s)
+        .collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if pts.len() < MIN_POINTS {
+        return None;
+    }
+    let mut n = MIN_POINTS;
+    let seed = slope(&pts[..n])?;
+    let mut fit = seed;
+    while n < pts.len() {
+        let segment = slope(&pts[n - 1..=n]).unwrap_or(f64::INFINITY);
+        if (segment - seed).abs() > TRIM {
+            break;
+        }
+        n += 1;
+        fit = slope(&pts[..n])?;
+    }
+    let mut used = pts[..n].to_vec();
+    used.reverse();
+    Some(Fit { order: fit, used })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovers_a_clean_power_law() {
+        let pts: Vec<_> = (0..10)
+            .map(|k| {
+                let h = 0.5f64.powi(k);
+                (h, 1e-2 * h.powi(4))
+            })
+            .collect();
+        let fit = observed_order(&pts, 1.0).unwrap();
+        assert!((fit.order - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn ignores_the_round_off_tail_and_large_steps() {
+        let mut pts = Vec::new();
+        for k in 0..30 {
+            let h = 0.7f64.powi(k);
+            // order 6 with a pre-asymptotic bump at large h and a floor at 1e-14
+            let e = 1e-1 * h.powi(6) * (1.0 + h) + 1e-14 * (1.0 + (k % 3) as f64);
+            pts.push((h, e));
+        }
+        let fit = observed_order(&pts, 2.0).unwrap();
+        assert!((fit.order - 6.0).abs() < 0.3, "{}", fit.order);
+        assert!(fit.used.iter().all(|&(_, e)| e >= 2e-12));
+        assert!(fit.used.len() >= 5);
+    }
+
+    #[test]
+    fn too_few_points_give_none() {
+        assert!(observed_order(&[(1.0, 1e-4), (0.5, 1e-5)], 1.0).is_none());
+        assert!(observed_order(&[(1.0, 1e-15), (0.5, 1e-16), (0.1, 1e-16)], 1.0).is_none());
+    }
+}
