@@ -130,27 +130,3 @@ pub fn fitted_order(points: &[(f64, f64)]) -> Option<f64> {
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
-/// Errors below this are at the round-off floor (about 1e-14 here) or too close to it.
-pub const FIT_MIN_ERROR: f64 = 1e-12;
-/// Errors above this are pre-asymptotic.
-pub const FIT_MAX_ERROR: f64 = 1e-4;
-/// Runs with fewer steps than this are pre-asymptotic.
-pub const FIT_MIN_STEPS: f64 = 8.0;
-
-/// The observed order over the asymptotic range: the least-squares slope over the points
-/// `(h, err)` of a run of length `t_final` with at least [`FIT_MIN_STEPS`] steps and an
-/// error between [`FIT_MIN_ERROR`] and [`FIT_MAX_ERROR`]. Returns the order and the number of
-/// points used; `None` with fewer than three points.
-pub fn asymptotic_order(points: &[(f64, f64)], t_final: f64) -> Option<(f64, usize)> {
-    let pts: Vec<(f64, f64)> = points
-        .iter()
-        .copied()
-        .filter(|&(h, e)| {
-            t_final / h >= FIT_MIN_STEPS - 1e-9 && (FIT_MIN_ERROR..=FIT_MAX_ERROR).contains(&e)
-        })
-        .collect();
-    if pts.len() < 3 {
-        return None;
-    }
-    fitted_order(&pts).map(|o| (o, pts.len()))
-}

@@ -111,7 +111,7 @@ mod tests {
         }
         let fit = observed_order(&pts, 2.0).unwrap();
         assert!((fit.order - 6.0).abs() < 0.3, "{}", fit.order);
-        assert!(fit.used.iter().all(|&(_, e)| e >= 2e-12));
+        assert!(fit.used.iter().all(|&(_, e)| e >= FLOOR * 2.0));
         assert!(fit.used.len() >= 5);
     }
 
