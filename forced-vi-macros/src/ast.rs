@@ -76,7 +76,7 @@ pub fn velocity_name(name: &Ident) -> Ident {
 /// Parses the item and the attribute's arguments. A malformed argument is recorded in `cx`
 /// and skipped, so that the others are still checked. `Err` only when the item is not a
 /// struct (then there is nothing to attach an impl to).
-pub fn parse(cx: &Ctxt, args: TokenStream, item: syn::Item) -> Result<Model, syn::Item> {
+pub fn parse(cx: &Ctxt, args: TokenStream, item: syn::Item) -> Result<Model, Box<syn::Item>> {
     let item = match item {
         syn::Item::Struct(s) => s,
         other => {
@@ -84,7 +84,7 @@ pub fn parse(cx: &Ctxt, args: TokenStream, item: syn::Item) -> Result<Model, syn
                 item_keyword(&other),
                 "#[forced_lagrangian] goes on a struct whose named fields are the model's `f64` parameters",
             );
-            return Err(other);
+            return Err(Box::new(other));
         }
     };
     let params = match &item.fields {

@@ -327,11 +327,7 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
                 format!("`{name}` is both a coordinate and a parameter (a field of the struct)"),
             );
         }
-        if let Some(p) = model
-            .params
-            .iter()
-            .find(|p| p.ident == c.velocity.to_string())
-        {
+        if let Some(p) = model.params.iter().find(|p| p.ident == c.velocity) {
             cx.error_spanned_by(
                 &p.ident,
                 format!(

@@ -732,7 +732,8 @@ impl<'a> Lowerer<'a> {
         };
         let idx = self.expr(&i.index);
         let group = &self.env.groups[g];
-        let vel = base.names.iter().any(|n| *n == group.velocity.to_string());
+        let velocity = group.velocity.to_string();
+        let vel = base.names.contains(&velocity);
         let at = match (idx.int, group.len.literal()) {
             (Some(k), Some(len)) => match usize::try_from(k).ok().filter(|&k| k < len) {
                 Some(k) => Idx::At(k),
