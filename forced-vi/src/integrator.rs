@@ -186,11 +186,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 
     /// A streaming stepper from `init` to `t_final`: an iterator of records, initial state
     /// first, that holds only the current state.
-    pub fn stepper(
-        &self,
-        init: InitialState<N>,
-        t_final: f64,
-    ) -> Result<Stepper<'_, M, N>, Error> {
+    pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
         Stepper::new(self, init, t_final)
     }
 
@@ -211,11 +207,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 
     /// Runs to `t_final` and collects every record. On failure the records computed so far
     /// come back with the error.
-    pub fn run(
-        &self,
-        init: InitialState<N>,
-        t_final: f64,
-    ) -> Result<Trajectory<N>, RunFailure<N>> {
+    pub fn run(&self, init: InitialState<N>, t_final: f64) -> Result<Trajectory<N>, RunFailure<N>> {
         let mut traj = Trajectory::default();
         let mut stepper = match self.stepper(init, t_final) {
             Ok(s) => s,
@@ -333,8 +325,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         let (sch, h) = (self.scheme, self.h);
         for i in 0..sch.quadrature_nodes() {
             let nj = self.model.node_jacobian(&self.xs[i], &self.vs[i]);
-            if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e))
-            {
+            if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
                 return Err(NewtonFailure::NonFinite);
             }
             self.jacs[i] = nj;
@@ -418,8 +409,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         if !(t_final.is_finite() && t_final >= 0.0) {
             return Err(Error::InvalidFinalTime { t_final });
         }
-        let check = |what: &'static str, x: &[f64; N]| match x.iter().position(|c| !c.is_finite())
-        {
+        let check = |what: &'static str, x: &[f64; N]| match x.iter().position(|c| !c.is_finite()) {
             Some(index) => Err(Error::NonFiniteInitialData { what, index }),
             None => Ok(()),
         };
@@ -454,7 +444,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let scheme = &integ.scheme;
         let s = scheme.stages();
         let r = scheme.quadrature_nodes();
-        let energy0 = energy(model, &q0, &v0, &p0).ok_or(Error::NonFiniteModel { step: 0, t: 0.0 })?;
+        let energy0 =
+            energy(model, &q0, &v0, &p0).ok_or(Error::NonFiniteModel { step: 0, t: 0.0 })?;
         let g0 = model.node_gradient(&q0, &v0);
         let zero_jac = NodeJacobian {
             grad: g0,
@@ -585,7 +576,12 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         self.prob.q0 = self.q.sum;
         self.prob.p0 = self.p.sum;
         self.newton.invalidate();
-        let scale = self.p.sum.amax().max(h * self.scale_f).max(f64::MIN_POSITIVE);
+        let scale = self
+            .p
+            .sum
+            .amax()
+            .max(h * self.scale_f)
+            .max(f64::MIN_POSITIVE);
         let rep = self.newton.solve(&mut self.prob, &mut self.z, scale)?;
         // The last residual evaluation was at the accepted iterate, so the node gradients in
         // `prob` belong to the solution. Σ_j G_j = h Σ_i b_i (L_q + F)_i gives the momentum
@@ -780,8 +776,11 @@ fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
         let lv = model.node_gradient(q, &v).lv;
         let e = mass_rcond(model, q, &v, step, t)?;
         let rhs = p - lv;
-        let (dv, _) = crate::newton::solve_small(&e, &rhs)
-            .ok_or(Error::SingularMassMatrix { step, t, rcond: 0.0 })?;
+        let (dv, _) = crate::newton::solve_small(&e, &rhs).ok_or(Error::SingularMassMatrix {
+            step,
+            t,
+            rcond: 0.0,
+        })?;
         v += dv;
         if !all_finite(&v) {
             return Err(Error::NonFiniteModel { step, t });

@@ -211,18 +211,14 @@ pub mod general {
         let (mut fq, mut a, mut b) = (lq, lqq, lqv);
         if M::STRUCTURE.has_force {
             let (f, fq_jac) = jacobian(
-                |x: SVector<DualSVec64<N>, N>| {
-                    SVector::from(m.force(&arr(&x), &lift(&va)))
-                },
+                |x: SVector<DualSVec64<N>, N>| SVector::from(m.force(&arr(&x), &lift(&va))),
                 q,
             );
             fq += f;
             a += fq_jac;
             if M::STRUCTURE.force_uses_velocity {
                 let (_, fv_jac) = jacobian(
-                    |y: SVector<DualSVec64<N>, N>| {
-                        SVector::from(m.force(&lift(&qa), &arr(&y)))
-                    },
+                    |y: SVector<DualSVec64<N>, N>| SVector::from(m.force(&lift(&qa), &arr(&y))),
                     v,
                 );
                 b += fv_jac;

@@ -319,11 +319,7 @@ mod tests {
         close(&w, &[1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0], 2e-16);
         let r5 = 1.0 / 5f64.sqrt();
         let (x, w) = lobatto_nodes_weights(4);
-        close(
-            &x,
-            &[0.0, 0.5 * (1.0 - r5), 0.5 * (1.0 + r5), 1.0],
-            2e-16,
-        );
+        close(&x, &[0.0, 0.5 * (1.0 - r5), 0.5 * (1.0 + r5), 1.0], 2e-16);
         close(&w, &[1.0 / 12.0, 5.0 / 12.0, 5.0 / 12.0, 1.0 / 12.0], 2e-16);
         let r37 = (3.0f64 / 7.0).sqrt();
         let (x, w) = lobatto_nodes_weights(5);
@@ -334,7 +330,13 @@ mod tests {
         );
         close(
             &w,
-            &[1.0 / 20.0, 49.0 / 180.0, 16.0 / 45.0, 49.0 / 180.0, 1.0 / 20.0],
+            &[
+                1.0 / 20.0,
+                49.0 / 180.0,
+                16.0 / 45.0,
+                49.0 / 180.0,
+                1.0 / 20.0,
+            ],
             2e-16,
         );
     }
@@ -365,7 +367,14 @@ mod tests {
 
     #[test]
     fn ids_round_trip() {
-        for t in ["midpoint", "trapezoid", "alpha(0.3)", "lobatto2", "lobatto5", "lobatto7"] {
+        for t in [
+            "midpoint",
+            "trapezoid",
+            "alpha(0.3)",
+            "lobatto2",
+            "lobatto5",
+            "lobatto7",
+        ] {
             let id: SchemeId = t.parse().unwrap();
             assert_eq!(id.to_string(), t);
             Scheme::new(id).unwrap();
