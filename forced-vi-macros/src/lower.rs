@@ -11,6 +11,11 @@
 //!   polynomial *degree* in `q` and in `v`, which drive the specialisation.
 //!
 //! Names are resolved here too, so an unknown identifier is reported at its own token.
+//!
+//! Room for time-dependent forcing `F(t, q, v)`: time would be one more resolvable name
+//! (a dual-valued variable with its own [`Var`] flavour and degree), bound from a `t`
+//! argument of the generated force helpers; the uses/degree analysis and the kernels' slot
+//! machinery need no other change, and a force that does not name `t` keeps today's code.
 
 use std::collections::{BTreeSet, HashMap};
 
