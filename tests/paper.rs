@@ -26,22 +26,32 @@ fn final_errors<M: ForcedLagrangian<2>>(
         .unwrap();
     let end = run.last().unwrap();
     assert!((end.t - goal.t).abs() < 1e-12);
-    let eq = (0..2).map(|i| (end.q[i] - goal.q[i]).abs()).fold(0.0, f64::max);
-    let ep = (0..2).map(|i| (end.p[i] - goal.p[i]).abs()).fold(0.0, f64::max);
+    let eq = (0..2)
+        .map(|i| (end.q[i] - goal.q[i]).abs())
+        .fold(0.0, f64::max);
+    let ep = (0..2)
+        .map(|i| (end.p[i] - goal.p[i]).abs())
+        .fold(0.0, f64::max);
     [eq, ep, (end.energy - goal.energy).abs()]
 }
 
 /// Step sizes 1/n from 1 down to 5e-5.
 fn grid() -> Vec<f64> {
-    [1, 2, 4, 5, 8, 10, 12, 14, 16, 20, 25, 32, 40, 50, 64, 80, 100, 200, 400, 1000, 2000, 5000, 10000, 20000]
-        .iter()
-        .map(|&n| 1.0 / n as f64)
-        .collect()
+    [
+        1, 2, 4, 5, 8, 10, 12, 14, 16, 20, 25, 32, 40, 50, 64, 80, 100, 200, 400, 1000, 2000, 5000,
+        10000, 20000,
+    ]
+    .iter()
+    .map(|&n| 1.0 / n as f64)
+    .collect()
 }
 
-
 fn lobatto_errors(s: usize, members: &[usize], steps: &[f64]) -> Vec<(f64, [f64; 3])> {
-    let scene = if members.len() > 1 { "coupled_van_der_pol_ensemble" } else { "coupled_van_der_pol" };
+    let scene = if members.len() > 1 {
+        "coupled_van_der_pol_ensemble"
+    } else {
+        "coupled_van_der_pol"
+    };
     let r = reference(scene);
     steps
         .iter()
@@ -93,15 +103,28 @@ fn paper_coupled_van_der_pol_flat_tails() {
     for s in 3..=5 {
         let errs = lobatto_errors(s, &[0], &tail);
         for (h, e) in &errs {
-            eprintln!("lobatto{s} h={h:e}: err q {:.2e} p {:.2e} energy {:.2e}", e[0], e[1], e[2]);
-            assert!(e.iter().all(|&x| x <= 1e-12), "lobatto{s} h={h}: {e:?} above 1e-12");
+            eprintln!(
+                "lobatto{s} h={h:e}: err q {:.2e} p {:.2e} energy {:.2e}",
+                e[0], e[1], e[2]
+            );
+            assert!(
+                e.iter().all(|&x| x <= 1e-12),
+                "lobatto{s} h={h}: {e:?} above 1e-12"
+            );
         }
         // No round-off growth: slimplectic's error grows like h^-2 here; a slope more negative
         // than −0.5 (faster than the √steps random walk) would be a round-off problem.
         for k in 0..3 {
-            let pts: Vec<(f64, f64)> = errs.iter().map(|(h, e)| (*h, e[k].max(1e-17))).collect();
+            // Below one ulp of an O(1) value (2.2e-16) errors are quantised noise.
+            let pts: Vec<(f64, f64)> = errs
+                .iter()
+                .map(|(h, e)| (*h, e[k].max(f64::EPSILON)))
+                .collect();
             let slope = fitted_order(&pts).unwrap();
-            assert!(slope > -0.5, "lobatto{s}: error grows as h shrinks (slope {slope:.2})");
+            assert!(
+                slope > -0.5,
+                "lobatto{s}: error grows as h shrinks (slope {slope:.2})"
+            );
         }
     }
 }
@@ -117,7 +140,10 @@ fn paper_coupled_van_der_pol_ensemble_orders() {
         let steps: Vec<f64> = grid().into_iter().filter(|&h| h >= smallest).collect();
         let errs = lobatto_errors(s, &members, &steps);
         for (h, e) in &errs {
-            eprintln!("lobatto{s} h={h:.5} mean err {:.3e} {:.3e} {:.3e}", e[0], e[1], e[2]);
+            eprintln!(
+                "lobatto{s} h={h:.5} mean err {:.3e} {:.3e} {:.3e}",
+                e[0], e[1], e[2]
+            );
         }
         check_orders(s, &errs, "ensemble mean");
     }
@@ -133,12 +159,19 @@ fn paper_energy_balance_converges_at_scheme_order() {
                 .unwrap()
                 .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
                 .unwrap();
-            let worst = run.records.iter().map(|r| r.energy_balance.abs()).fold(0.0, f64::max);
+            let worst = run
+                .records
+                .iter()
+                .map(|r| r.energy_balance.abs())
+                .fold(0.0, f64::max);
             pts.push((h, worst));
         }
         let order = observed_order(&pts, 1.0).unwrap().order;
         eprintln!("lobatto{s}: energy-balance order {order:.3}");
-        assert!((order - (2 * s - 2) as f64).abs() <= 0.3, "lobatto{s}: {order}");
+        assert!(
+            (order - (2 * s - 2) as f64).abs() <= 0.3,
+            "lobatto{s}: {order}"
+        );
     }
 }
 
@@ -148,10 +181,17 @@ fn paper_damped_oscillator_midpoint_recurrence() {
     let h = 0.07;
     let run = Integrator::new(&model, Scheme::midpoint(), h)
         .unwrap()
-        .run(InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]), 200.0 * h)
+        .run(
+            InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]),
+            200.0 * h,
+        )
         .unwrap();
     let mat = |a: [[f64; 2]; 2]| nalgebra::Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
-    let (m, k, d) = (mat(model.mass()), mat(model.stiffness()), mat(model.damping()));
+    let (m, k, d) = (
+        mat(model.mass()),
+        mat(model.stiffness()),
+        mat(model.damping()),
+    );
     let q: Vec<_> = run.records.iter().map(|r| r.q).collect();
     let mut worst: f64 = 0.0;
     for w in q.windows(3) {
@@ -201,6 +241,9 @@ fn paper_alpha_rule_forcing_contributions() {
         let left = -model.m * vbar + h * (1.0 - alpha) * f + r0.p[0];
         let right = model.m * vbar + h * alpha * f - r1.p[0];
         eprintln!("alpha {alpha}: defects {left:.1e} {right:.1e}");
-        assert!(left.abs() <= 1e-14 && right.abs() <= 1e-14, "alpha {alpha}: {left:e} {right:e}");
+        assert!(
+            left.abs() <= 1e-14 && right.abs() <= 1e-14,
+            "alpha {alpha}: {left:e} {right:e}"
+        );
     }
 }

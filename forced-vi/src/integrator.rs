@@ -271,24 +271,33 @@ struct StepProblem<'a, M, const N: usize> {
     vs: Vec<SVector<f64, N>>,
     grads: Vec<NodeGradient<N>>,
     jacs: Vec<NodeJacobian<N>>,
+    /// For a constant mass matrix, the `E` part of the Jacobian for the step size `base_h`.
+    base: DMatrix<f64>,
+    base_h: f64,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     fn nodes(&mut self, z: &DVector<f64>) {
         let s = self.scheme.stages();
+        let zs = z.as_slice();
+        let inv_h = 1.0 / self.h;
         for i in 0..self.scheme.quadrature_nodes() {
             let mut x = self.q0;
             let mut v = SVector::<f64, N>::zeros();
             for j in 1..s {
-                let zj = z.fixed_rows::<N>((j - 1) * N);
+                let zj = &zs[(j - 1) * N..j * N];
                 let (phi, psi) = (self.scheme.phi(i, j), self.scheme.psi(i, j));
                 if phi != 0.0 {
-                    x.axpy(phi, &zj, 1.0);
+                    for a in 0..N {
+                        x[a] += phi * zj[a];
+                    }
                 }
-                v.axpy(psi, &zj, 1.0);
+                for a in 0..N {
+                    v[a] += psi * zj[a];
+                }
             }
             self.xs[i] = x;
-            self.vs[i] = v / self.h;
+            self.vs[i] = v * inv_h;
         }
     }
 }
@@ -308,14 +317,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             }
             self.grads[i] = g;
         }
+        let rs = r.as_mut_slice();
         for j in 0..sch.stages() - 1 {
             let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
             for (i, g) in self.grads.iter().enumerate() {
                 let bi = sch.b()[i];
-                gj.axpy(bi * h * sch.phi(i, j), &g.fq, 1.0);
-                gj.axpy(bi * sch.psi(i, j), &g.lv, 1.0);
+                let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+                for a in 0..N {
+                    gj[a] += cf * g.fq[a] + cl * g.lv[a];
+                }
             }
-            r.fixed_rows_mut::<N>(j * N).copy_from(&gj);
+            rs[j * N..(j + 1) * N].copy_from_slice(gj.as_slice());
         }
         Ok(())
     }
@@ -331,33 +343,58 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             self.jacs[i] = nj;
         }
         let constant_mass = M::STRUCTURE.constant_mass;
-        let s = sch.stages();
-        jac.fill(0.0);
-        // ∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i + Ψ_ij Ψ_im E_i / h]
-        for (i, nj) in self.jacs.iter().enumerate() {
-            let bi = sch.b()[i];
-            for j in 0..s - 1 {
-                let (phj, psj) = (sch.phi(i, j), sch.psi(i, j));
-                for m in 1..s {
-                    let (phm, psm) = (sch.phi(i, m), sch.psi(i, m));
-                    let mut blk = jac.fixed_view_mut::<N, N>(j * N, (m - 1) * N);
-                    let ca = bi * h * phj * phm;
-                    if ca != 0.0 {
-                        blk += nj.a * ca;
-                    }
-                    let cb = bi * phj * psm;
-                    if cb != 0.0 {
-                        blk += nj.b * cb;
-                    }
-                    let cc = bi * psj * phm;
-                    if cc != 0.0 && !constant_mass {
-                        blk += nj.c * cc;
-                    }
-                    blk += nj.e * (bi * psj * psm / h);
+        let rows = (sch.stages() - 1) * N;
+        if constant_mass {
+            // E is the same at every node and every step: its part is built once per h.
+            if self.base_h != h {
+                let e = self.jacs[0].e;
+                let bs = self.base.as_mut_slice();
+                bs.fill(0.0);
+                for t in sch.jacobian_terms() {
+                    add_block(bs, rows, t.j, t.m, t.e / h, &e);
                 }
+                self.base_h = h;
+            }
+            jac.copy_from(&self.base);
+        } else {
+            jac.fill(0.0);
+        }
+        let js = jac.as_mut_slice();
+        for t in sch.jacobian_terms() {
+            let nj = &self.jacs[t.i];
+            if t.a != 0.0 {
+                add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+            }
+            if t.b != 0.0 {
+                add_block(js, rows, t.j, t.m, t.b, &nj.b);
+            }
+            if !constant_mass {
+                if t.c != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.c, &nj.c);
+                }
+                add_block(js, rows, t.j, t.m, t.e / h, &nj.e);
             }
         }
         Ok(())
+    }
+}
+
+/// Adds `coef · blk` to block `(j, m − 1)` of a column-major matrix with `rows` rows.
+#[inline(always)]
+fn add_block<const N: usize>(
+    js: &mut [f64],
+    rows: usize,
+    j: usize,
+    m: usize,
+    coef: f64,
+    blk: &SMatrix<f64, N, N>,
+) {
+    let origin = (m - 1) * N * rows + j * N;
+    for c in 0..N {
+        let col = &mut js[origin + c * rows..origin + c * rows + N];
+        for (x, y) in col.iter_mut().zip(blk.column(c).iter()) {
+            *x += coef * y;
+        }
     }
 }
 
@@ -465,6 +502,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 vs: vec![v0; r],
                 grads: vec![g0; r],
                 jacs: vec![zero_jac; r],
+                base: DMatrix::zeros((s - 1) * N, (s - 1) * N),
+                base_h: f64::NAN,
             },
             newton: Newton::new((s - 1) * N, integ.options.newton),
             options: integ.options,
@@ -556,10 +595,16 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let d = sch.d();
         for j in 1..s {
             let zj = if self.has_prev {
+                let same = h == self.h_prev;
                 let tau = 1.0 + d[j] * h / self.h_prev;
                 let mut x = -self.z_prev[s - 1];
                 for m in 1..s {
-                    x.axpy(sch.basis_at(tau, m), &self.z_prev[m], 1.0);
+                    let l = if same {
+                        sch.extrapolation(j, m)
+                    } else {
+                        sch.basis_at(tau, m)
+                    };
+                    x += self.z_prev[m] * l;
                 }
                 x
             } else {
@@ -612,7 +657,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let mut vguess = SVector::<f64, N>::zeros();
         for m in 1..s {
             let zm = self.z.fixed_rows::<N>((m - 1) * N);
-            vguess.axpy(sch.basis_derivative_at(1.0, m) / h, &zm, 1.0);
+            vguess.axpy(sch.end_slope(m) / h, &zm, 1.0);
         }
         self.z_prev[0] = SVector::zeros();
         for m in 1..s {

@@ -84,6 +84,35 @@ pub struct Scheme {
     phi: Vec<f64>,
     /// `Ψ_ij = ℓ_j'(c_i)`, row-major `r × s`.
     psi: Vec<f64>,
+    /// The non-zero terms of the Jacobian chain rule, see [`JacobianTerm`].
+    terms: Vec<JacobianTerm>,
+    /// `ℓ_m(1 + d_j)`, row-major `s × s`: the previous step's polynomial extrapolated to
+    /// this step's control points (the predictor for equal steps).
+    extrapolation: Vec<f64>,
+    /// `ℓ_m'(1)`: the polynomial's slope at the end of the step.
+    end_slope: Vec<f64>,
+}
+
+/// One term of `∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i
+/// + Ψ_ij Ψ_im E_i / h]` for a residual row `j < s − 1` and an unknown `m ≥ 1`, with the
+/// factors of `h` left out. Terms whose four coefficients vanish (most of them for Lobatto,
+/// where `Φ = I`) are not stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JacobianTerm {
+    /// Quadrature node.
+    pub i: usize,
+    /// Residual block row.
+    pub j: usize,
+    /// Unknown block column (`m ≥ 1`).
+    pub m: usize,
+    /// `b_i Φ_ij Φ_im` (times `h`) on `A`.
+    pub a: f64,
+    /// `b_i Φ_ij Ψ_im` on `B`.
+    pub b: f64,
+    /// `b_i Ψ_ij Φ_im` on `C`.
+    pub c: f64,
+    /// `b_i Ψ_ij Ψ_im` (over `h`) on `E`.
+    pub e: f64,
 }
 
 impl Scheme {
@@ -129,6 +158,31 @@ impl Scheme {
                 psi[i * s + j] = lagrange_derivative(&d, j, ci);
             }
         }
+        let mut terms = Vec::new();
+        for (i, &bi) in b.iter().enumerate() {
+            for j in 0..s - 1 {
+                for m in 1..s {
+                    let (phj, psj) = (phi[i * s + j], psi[i * s + j]);
+                    let (phm, psm) = (phi[i * s + m], psi[i * s + m]);
+                    let t = JacobianTerm {
+                        i,
+                        j,
+                        m,
+                        a: bi * phj * phm,
+                        b: bi * phj * psm,
+                        c: bi * psj * phm,
+                        e: bi * psj * psm,
+                    };
+                    if t.a != 0.0 || t.b != 0.0 || t.c != 0.0 || t.e != 0.0 {
+                        terms.push(t);
+                    }
+                }
+            }
+        }
+        let extrapolation = (0..s * s)
+            .map(|k| lagrange(&d, k % s, 1.0 + d[k / s]))
+            .collect();
+        let end_slope = (0..s).map(|m| lagrange_derivative(&d, m, 1.0)).collect();
         Scheme {
             id,
             d,
@@ -136,6 +190,9 @@ impl Scheme {
             b,
             phi,
             psi,
+            terms,
+            extrapolation,
+            end_slope,
         }
     }
 
@@ -173,6 +230,11 @@ impl Scheme {
     pub fn psi(&self, i: usize, j: usize) -> f64 {
         self.psi[i * self.d.len() + j]
     }
+    /// The non-zero terms of the Jacobian chain rule.
+    pub fn jacobian_terms(&self) -> &[JacobianTerm] {
+        &self.terms
+    }
+
     /// The classical order of the scheme.
     pub fn order(&self) -> usize {
         match self.id {
@@ -183,14 +245,21 @@ impl Scheme {
         }
     }
 
+    /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
+    #[inline]
+    pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {
+        self.extrapolation[j * self.d.len() + m]
+    }
+
+    /// `ℓ_m'(1)`.
+    #[inline]
+    pub(crate) fn end_slope(&self, m: usize) -> f64 {
+        self.end_slope[m]
+    }
+
     /// Evaluates the Lagrange basis on the control points at `tau` (in units of the step).
     pub(crate) fn basis_at(&self, tau: f64, j: usize) -> f64 {
         lagrange(&self.d, j, tau)
-    }
-
-    /// Evaluates the derivative of the Lagrange basis at `tau`.
-    pub(crate) fn basis_derivative_at(&self, tau: f64, j: usize) -> f64 {
-        lagrange_derivative(&self.d, j, tau)
     }
 }
 

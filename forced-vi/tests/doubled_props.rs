@@ -45,7 +45,13 @@ fn fd_blocks(m: &Rich, q: &SVector<f64, 2>, v: &SVector<f64, 2>) -> NodeJacobian
         b.set_column(k, &((gp.fq - gm.fq) / (2.0 * h)));
         e.set_column(k, &((gp.lv - gm.lv) / (2.0 * h)));
     }
-    NodeJacobian { grad: grad(q, v), a, b, c, e }
+    NodeJacobian {
+        grad: grad(q, v),
+        a,
+        b,
+        c,
+        e,
+    }
 }
 
 fn close(x: &SMatrix<f64, 2, 2>, y: &SMatrix<f64, 2, 2>, tol: f64) -> bool {
