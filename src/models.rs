@@ -3,7 +3,7 @@
 //!
 //! Each model's parameters are its `f64` fields; the attribute gives the Lagrangian and the
 //! force over named coordinates (the velocity of `x` is `x_dot`) and writes the
-//! [`ForcedLagrangian`](forced_vi::ForcedLagrangian) impl with kernels specialised to the
+//! [`ForcedLagrangian`] impl with kernels specialised to the
 //! model's structure.
 
 use forced_vi::prelude::*;

@@ -593,10 +593,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let sch = self.prob.scheme;
         let s = sch.stages();
         let d = sch.d();
-        for j in 1..s {
+        for (j, &dj) in d.iter().enumerate().skip(1) {
             let zj = if self.has_prev {
                 let same = h == self.h_prev;
-                let tau = 1.0 + d[j] * h / self.h_prev;
+                let tau = 1.0 + dj * h / self.h_prev;
                 let mut x = -self.z_prev[s - 1];
                 for m in 1..s {
                     let l = if same {
@@ -608,7 +608,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 }
                 x
             } else {
-                self.v * (d[j] * h)
+                self.v * (dj * h)
             };
             self.z.fixed_rows_mut::<N>((j - 1) * N).copy_from(&zj);
         }

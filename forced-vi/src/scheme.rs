@@ -239,7 +239,7 @@ impl Scheme {
     pub fn order(&self) -> usize {
         match self.id {
             SchemeId::Midpoint | SchemeId::Trapezoid => 2,
-            SchemeId::Alpha(a) if a == 0.5 => 2,
+            SchemeId::Alpha(0.5) => 2,
             SchemeId::Alpha(_) => 1,
             SchemeId::Lobatto(s) => 2 * s - 2,
         }
