@@ -38,7 +38,7 @@ struct CommonArgs {
     /// Run only these scenes (repeat or comma-separate; see `list`).
     #[arg(long, value_name = "NAME", value_delimiter = ',', global = true)]
     scene: Vec<String>,
-    /// Run only these methods: lobatto<s>, midpoint, trapezoid, alpha(<a>), dop853, tsit45,
+    /// Run only these methods: lobattoS (S >= 2), midpoint, trapezoid, alpha(A), dop853, tsit45,
     /// bdf, esdirk34 (repeat or comma-separate).
     #[arg(long, value_name = "NAME", value_delimiter = ',', global = true)]
     method: Vec<String>,
