@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod baselines;
+pub mod handwritten;
 pub mod models;
 pub mod reference;
 pub mod report;
