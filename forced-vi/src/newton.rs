@@ -46,7 +46,7 @@ impl Default for NewtonOptions {
             atol: 1e-15,
             residual_tol: 1e-9,
             max_backtracks: 10,
-            simplified: false,
+            simplified: true,
         }
     }
 }
@@ -78,6 +78,9 @@ impl NewtonOptions {
         self
     }
 }
+
+/// Simplified Newton refreshes its Jacobian when the contraction rate exceeds this.
+const THETA_REFRESH: f64 = 1e-2;
 
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -394,9 +397,14 @@ impl Newton {
                     backtracks,
                 });
             }
-            if o.simplified && theta.is_finite() && theta > 0.5 {
-                // Slow contraction: refresh the Jacobian.
-                self.have_factors = false;
+            if o.simplified && (it == 1 || theta > THETA_REFRESH) {
+                // Stale factors contract slowly; a fresh Jacobian restores quadratic
+                // convergence, so the accepted iterate is as exact as full Newton's.
+                // After the first iteration θ is unknown; a small first correction means a
+                // good initial guess, so the factors taken there stay accurate.
+                if it > 1 || step > 1e-3 * max_norm(z) {
+                    self.have_factors = false;
+                }
             }
         }
         Err(NewtonFailure::MaxIterations { residual: rnorm })
