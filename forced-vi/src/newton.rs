@@ -33,8 +33,9 @@ pub struct NewtonOptions {
     /// Halvings allowed in the line search before declaring stagnation (default 10).
     pub max_backtracks: usize,
     /// Reuse the Jacobian's LU factors across the iterations of one solve (simplified
-    /// Newton); they are refreshed when the contraction is slow (default false: full Newton
-    /// converges quadratically, which the round-off-level error floors rely on).
+    /// Newton) (default true). The factors are kept only while the contraction rate stays
+    /// below 1e-2, so the accepted iterate is as exact as full Newton's; the round-off-level
+    /// error floors depend on that.
     pub simplified: bool,
 }
 
