@@ -12,6 +12,12 @@ use clap::{Args, Parser, Subcommand};
 use forced_vi_scenes::report::{self, Method, Options};
 use forced_vi_scenes::scenes;
 
+mod alloc_count;
+
+/// Counts heap allocations for `step-cost` (allocations per step).
+#[global_allocator]
+static ALLOC: alloc_count::Counting = alloc_count::Counting;
+
 /// Work-precision report for the forced variational integrators.
 ///
 /// Runs every scene with the variational schemes (over step sizes) and with the baseline
@@ -53,6 +59,9 @@ enum Command {
     WorkPrecision,
     /// List the scenes and the default methods.
     List,
+    /// Per-step cost: generated against hand-written kernels, chain scaling, allocations,
+    /// compile time and peak RSS (writes step_cost.csv and its section).
+    StepCost,
 }
 
 fn options(common: &CommonArgs) -> Result<Options, report::ReportError> {
@@ -101,11 +110,24 @@ fn work_precision(common: &CommonArgs) -> Result<(), report::ReportError> {
     Ok(())
 }
 
+fn step_cost(common: &CommonArgs) -> Result<(), report::ReportError> {
+    let opts = options(common)?;
+    let summary = report::step_cost::run(&opts, Some(alloc_count::allocations))?;
+    println!(
+        "wrote {} ({} rows) in {:.1} s",
+        opts.out.join("step_cost.csv").display(),
+        summary.rows.len(),
+        summary.elapsed
+    );
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         None | Some(Command::WorkPrecision) => work_precision(&cli.common),
         Some(Command::List) => list(),
+        Some(Command::StepCost) => step_cost(&cli.common),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
