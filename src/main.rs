@@ -59,6 +59,8 @@ enum Command {
     WorkPrecision,
     /// List the scenes and the default methods.
     List,
+    /// Stiff and extreme cases: writes stability.csv and the stability section.
+    Stability,
     /// Per-step cost: generated against hand-written kernels, chain scaling, allocations,
     /// compile time and peak RSS (writes step_cost.csv and its section).
     StepCost,
@@ -127,6 +129,22 @@ fn main() -> ExitCode {
     let result = match cli.command {
         None | Some(Command::WorkPrecision) => work_precision(&cli.common),
         Some(Command::List) => list(),
+        Some(Command::Stability) => options(&cli.common)
+            .and_then(|o| report::stability::run(&o).map(|s| (o, s)))
+            .map(|(o, s)| {
+                let done = s
+                    .rows
+                    .iter()
+                    .filter(|r| !r.outcome.to_string().starts_with("failed"))
+                    .count();
+                println!(
+                    "wrote {} ({} runs, {} finished) in {:.1} s",
+                    o.out.join("stability.csv").display(),
+                    s.rows.len(),
+                    done,
+                    s.elapsed
+                );
+            }),
         Some(Command::StepCost) => step_cost(&cli.common),
     };
     match result {

@@ -36,6 +36,7 @@ pub mod orders;
 pub mod plan;
 pub mod plots;
 pub mod readme;
+pub mod stability;
 pub mod step_cost;
 pub mod work_precision;
 

@@ -1,0 +1,57 @@
+//! End to end: `forced-vi-report stability --quick` writes `stability.csv` with the promised
+//! columns, every outcome is `ok`, `recovered` or `failed:<kind>`, no case panicked, and no
+//! `ok` or `recovered` row carries a non-finite error.
+
+use std::fs;
+use std::process::Command;
+
+#[test]
+fn extreme_stability_quick_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path();
+    let status = Command::new(env!("CARGO_BIN_EXE_forced-vi-report"))
+        .args(["stability", "--quick", "--no-progress", "--out"])
+        .arg(out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+
+    let csv = fs::read_to_string(out.join("stability.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("scene,method,h,outcome,steps_done,max_newton_iters,err_final,max_energy_balance_err")
+    );
+    let rows: Vec<&str> = lines.collect();
+    assert!(rows.len() >= 20, "{} rows", rows.len());
+    let mut scenes = std::collections::BTreeSet::new();
+    for row in &rows {
+        let cols: Vec<&str> = row.split(',').collect();
+        assert_eq!(cols.len(), 8, "{row}");
+        scenes.insert(cols[0]);
+        let h: f64 = cols[2].parse().unwrap();
+        assert!(h.is_finite() && h > 0.0, "{row}");
+        let outcome = cols[3];
+        let _steps: usize = cols[4].parse().unwrap();
+        let _iters: usize = cols[5].parse().unwrap();
+        let err: f64 = cols[6].parse().unwrap();
+        let balance: f64 = cols[7].parse().unwrap();
+        match outcome {
+            "ok" | "recovered" => {
+                assert!(err.is_finite() && err >= 0.0, "{row}");
+                assert!(balance.is_finite(), "{row}");
+            }
+            o => {
+                let kind = o.strip_prefix("failed:").unwrap_or_else(|| panic!("{row}"));
+                assert!(!kind.is_empty(), "{row}");
+                assert_ne!(kind, "panic", "{row}");
+                assert_ne!(kind, "non_finite_result", "{row}");
+            }
+        }
+    }
+    assert!(scenes.len() >= 5, "{scenes:?}");
+
+    let readme = fs::read_to_string(out.join("README.md")).unwrap();
+    assert!(readme.contains("## Stability on stiff and extreme cases"));
+    assert!(out.join("sections").join("stability.md").exists());
+}
