@@ -47,8 +47,12 @@ pub struct Reference {
 impl Reference {
     /// Parses the CSV text of a reference file.
     pub fn parse(text: &str) -> Result<Self, ReferenceError> {
-        let mut lines = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-        let header = lines.next().ok_or_else(|| ReferenceError("empty file".into()))?;
+        let mut lines = text
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+        let header = lines
+            .next()
+            .ok_or_else(|| ReferenceError("empty file".into()))?;
         let cols = header.split(',').count();
         if cols < 6 || (cols - 3) % 3 != 0 {
             return Err(ReferenceError(format!("unexpected header `{header}`")));
@@ -62,7 +66,11 @@ impl Reference {
                 .collect::<Result<_, _>>()
                 .map_err(|e| ReferenceError(format!("row {}: {e}", i + 1)))?;
             if vals.len() != cols {
-                return Err(ReferenceError(format!("row {} has {} columns", i + 1, vals.len())));
+                return Err(ReferenceError(format!(
+                    "row {} has {} columns",
+                    i + 1,
+                    vals.len()
+                )));
             }
             points.push(ReferencePoint {
                 member: vals[0] as usize,
@@ -111,22 +119,3 @@ pub fn embedded(scene: &str) -> Option<&'static str> {
         _ => return None,
     })
 }
-
-/// Least-squares slope of `log(err)` against `log(h)`.
-pub fn fitted_order(points: &[(f64, f64)]) -> Option<f64> {
-    let pts: Vec<(f64, f64)> = points
-        .iter()
-        .filter(|(h, e)| *h > 0.0 && *e > 0.0 && e.is_finite())
-        .map(|(h, e)| (h.ln(), e.ln()))
-        .collect();
-    if pts.len() < 2 {
-        return None;
-    }
-    let n = pts.len() as f64;
-    let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
-    let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
-    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-    let sxx: f64 = pts.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
-    (sxx > 0.0).then(|| sxy / sxx)
-}
-

@@ -3,8 +3,8 @@
 use forced_vi::prelude::*;
 use forced_vi::SchemeId;
 use forced_vi_scenes::models::{CoupledVanDerPol, DampedOscillator};
-use forced_vi_scenes::reference::{embedded, fitted_order, Reference, ReferencePoint};
-use forced_vi_scenes::report::orders::observed_order;
+use forced_vi_scenes::reference::{embedded, Reference, ReferencePoint};
+use forced_vi_scenes::report::orders::{observed_order, slope};
 
 fn reference(scene: &str) -> Reference {
     Reference::parse(embedded(scene).expect("embedded reference")).expect("valid reference")
@@ -120,7 +120,7 @@ fn paper_coupled_van_der_pol_flat_tails() {
                 .iter()
                 .map(|(h, e)| (*h, e[k].max(f64::EPSILON)))
                 .collect();
-            let slope = fitted_order(&pts).unwrap();
+            let slope = slope(&pts).unwrap();
             assert!(
                 slope > -0.5,
                 "lobatto{s}: error grows as h shrinks (slope {slope:.2})"
