@@ -174,6 +174,8 @@ struct Problem<M, const N: usize> {
     reference: Vec<f64>,
     /// Where the reference comes from and how accurate it is.
     reference_note: String,
+    /// Estimated absolute error of the reference.
+    reference_accuracy: f64,
 }
 
 /// A problem with its model type erased.
@@ -183,6 +185,8 @@ trait Case: Sync {
     fn reference_note(&self) -> &str;
     /// The size of the solution: max-norm of the initial and the reference positions.
     fn scale(&self) -> f64;
+    /// Estimated absolute error of the reference.
+    fn accuracy(&self) -> f64;
     fn variational(&self, id: SchemeId, h: f64) -> Row;
     fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow;
 }
@@ -309,6 +313,9 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Case for Problem<M, N> {
             .chain(&self.reference)
             .fold(0.0, |m: f64, x| m.max(x.abs()))
     }
+    fn accuracy(&self) -> f64 {
+        self.reference_accuracy
+    }
     fn variational(&self, id: SchemeId, h: f64) -> Row {
         self.run(id, h * self.time_scale)
     }
@@ -360,7 +367,7 @@ fn reference_end(csv: &str) -> Result<(f64, Vec<f64>), ReportError> {
 fn fine_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
     p: &Problem<M, N>,
     h_model: f64,
-) -> (Vec<f64>, String) {
+) -> (Vec<f64>, String, f64) {
     let end = |id: SchemeId| -> Option<Vec<f64>> {
         let scheme = Scheme::new(id).ok()?;
         let integ = Integrator::new(&p.model, scheme, h_model).ok()?;
@@ -378,34 +385,47 @@ fn fine_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
             (
                 a,
                 format!("lobatto5 at h = {h_model:e} (lobatto4 at the same h differs by {d:.1e})"),
+                d.max(1e-15),
             )
         }
-        (Some(a), None) => (a, format!("lobatto5 at h = {h_model:e} (no cross-check)")),
-        _ => (vec![f64::NAN; N], "reference run failed".to_string()),
+        (Some(a), None) => (
+            a,
+            format!("lobatto5 at h = {h_model:e} (no cross-check)"),
+            f64::NAN,
+        ),
+        _ => (
+            vec![f64::NAN; N],
+            "reference run failed".to_string(),
+            f64::NAN,
+        ),
     }
 }
 
-/// A BDF reference at `tol`, cross-checked against BDF at `10 · tol`.
-fn bdf_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
+/// A baseline reference (`solver` at `tol`), cross-checked against `check` at `check_tol`.
+fn baseline_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
     p: &Problem<M, N>,
-    tol: f64,
-) -> (Vec<f64>, String) {
-    match (
-        p.baseline_q(Baseline::Bdf, tol),
-        p.baseline_q(Baseline::Bdf, 10.0 * tol),
-    ) {
+    (solver, tol): (Baseline, f64),
+    (check, check_tol): (Baseline, f64),
+) -> (Vec<f64>, String, f64) {
+    match (p.baseline_q(solver, tol), p.baseline_q(check, check_tol)) {
         (Ok((a, _)), Ok((b, _))) => {
             let d = q_error(&a, &b);
             (
                 a,
-                format!(
-                    "diffsol BDF at tol {tol:e} (BDF at {:e} differs by {d:.1e})",
-                    10.0 * tol
-                ),
+                format!("{solver} at tol {tol:e} ({check} at {check_tol:e} differs by {d:.1e})"),
+                d.max(1e-15),
             )
         }
-        (Ok((a, _)), Err(_)) => (a, format!("diffsol BDF at tol {tol:e} (no cross-check)")),
-        _ => (vec![f64::NAN; N], "reference run failed".to_string()),
+        (Ok((a, _)), Err(_)) => (
+            a,
+            format!("{solver} at tol {tol:e} (no cross-check)"),
+            f64::NAN,
+        ),
+        _ => (
+            vec![f64::NAN; N],
+            "reference run failed".to_string(),
+            f64::NAN,
+        ),
     }
 }
 
@@ -453,7 +473,8 @@ fn plan(quick: bool) -> Result<Vec<Planned>, ReportError> {
         t_final: t_end,
         time_scale: 1.0,
         reference: q_ref,
-        reference_note: "data/reference/stiff_van_der_pol.csv (scipy Radau, ~1e-11)".into(),
+        reference_note: "data/reference/stiff_van_der_pol.csv (scipy Radau)".into(),
+        reference_accuracy: 1e-11,
     };
     let vdp_hs = if quick {
         vec![1.0, 0.1, 0.01]
@@ -489,8 +510,13 @@ fn plan(quick: bool) -> Result<Vec<Planned>, ReportError> {
         time_scale: mu,
         reference: Vec::new(),
         reference_note: String::new(),
+        reference_accuracy: f64::NAN,
     };
-    (scaled.reference, scaled.reference_note) = bdf_reference(&scaled, 1e-10);
+    (
+        scaled.reference,
+        scaled.reference_note,
+        scaled.reference_accuracy,
+    ) = baseline_reference(&scaled, (Baseline::Bdf, 1e-10), (Baseline::Bdf, 1e-9));
     let scaled_hs = if quick {
         vec![0.1, 1e-3]
     } else {
@@ -528,8 +554,13 @@ fn plan(quick: bool) -> Result<Vec<Planned>, ReportError> {
         time_scale: 1.0,
         reference: Vec::new(),
         reference_note: String::new(),
+        reference_accuracy: f64::NAN,
     };
-    (chain.reference, chain.reference_note) = fine_reference(&chain, t_chain / 50_000.0);
+    (
+        chain.reference,
+        chain.reference_note,
+        chain.reference_accuracy,
+    ) = fine_reference(&chain, t_chain / 50_000.0);
     let hw: Vec<f64> = if quick {
         vec![0.1, 10.0, 1000.0]
     } else {
@@ -565,6 +596,7 @@ fn plan(quick: bool) -> Result<Vec<Planned>, ReportError> {
         time_scale: 1.0,
         reference: q_ref,
         reference_note: "data/reference/overdamped_oscillator.csv (closed form)".into(),
+        reference_accuracy: 1e-15,
     };
     out.push((
         Box::new(od),
@@ -589,8 +621,16 @@ fn plan(quick: bool) -> Result<Vec<Planned>, ReportError> {
         time_scale: 1.0,
         reference: Vec::new(),
         reference_note: String::new(),
+        reference_accuracy: f64::NAN,
     };
-    (big.reference, big.reference_note) = bdf_reference(&big, 1e-10);
+    // DOP853 stops on this problem (its stiffness detection), so the reference is a fine
+    // lobatto5 run, checked against BDF.
+    (big.reference, big.reference_note, big.reference_accuracy) = fine_reference(&big, 1e-4);
+    if let Ok((b, _)) = big.baseline_q(Baseline::Bdf, 1e-10) {
+        let d = q_error(&b, &big.reference);
+        big.reference_note
+            .push_str(&format!("; bdf at tol 1e-10 differs by {d:.1e}"));
+    }
     out.push((
         Box::new(big),
         Grid {
@@ -764,7 +804,8 @@ fn best_baseline<'a>(
 ) -> Option<&'a BaselineRow> {
     rows.iter()
         .filter(|r| r.scene == scene && r.solver == solver && r.failure.is_none())
-        .filter(|r| r.err_final <= target)
+        // A run identical to the reference is the reference itself: leave it out.
+        .filter(|r| r.err_final > 0.0 && r.err_final <= target)
         .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
 }
 
@@ -790,19 +831,23 @@ fn section(s: &Summary, cases: &[&dyn Case], grids: &[&Grid], quick: bool) -> St
     );
 
     let _ = writeln!(w, "### Scenes and grids\n");
-    let _ = writeln!(w, "| scene | what | methods | h | reference |");
+    let _ = writeln!(
+        w,
+        "| scene | what | methods | h | reference (estimated error) |"
+    );
     let _ = writeln!(w, "|---|---|---|---|---|");
     for (c, g) in cases.iter().zip(grids) {
         let hs: Vec<String> = g.hs.iter().map(|h| format!("{h:.3e}")).collect();
         let ms: Vec<String> = g.methods.iter().map(|m| m.to_string()).collect();
         let _ = writeln!(
             w,
-            "| `{}` | {} | {} | {} | {} |",
+            "| `{}` | {} | {} | {} | {} (~{:.0e}) |",
             c.name(),
             c.description(),
             ms.join(", "),
             hs.join(", "),
-            c.reference_note()
+            c.reference_note(),
+            c.accuracy()
         );
     }
     let _ = writeln!(
@@ -928,8 +973,21 @@ fn section(s: &Summary, cases: &[&dyn Case], grids: &[&Grid], quick: bool) -> St
     );
     let _ = writeln!(w, "|---|---|---|---|---|---|");
     let mut wins = (0, 0, 0);
+    let mut pairs = 0;
     for c in cases {
         for target in [1e-2, 1e-4, 1e-6, 1e-8] {
+            // Targets within 10x of the reference's own error are not measurable.
+            if !(c.accuracy() * 10.0 <= target) {
+                let _ = writeln!(
+                    w,
+                    "| `{}` | {:.0e} | not measurable: the reference is only good to about {:.0e} | | | |",
+                    c.name(),
+                    target,
+                    c.accuracy()
+                );
+                continue;
+            }
+            pairs += 1;
             let v = best_variational(&s.rows, c.name(), target);
             let b = best_baseline(&s.baselines, c.name(), Baseline::Bdf, target);
             let e = best_baseline(&s.baselines, c.name(), Baseline::Esdirk34, target);
@@ -985,10 +1043,7 @@ fn section(s: &Summary, cases: &[&dyn Case], grids: &[&Grid], quick: bool) -> St
         w,
         "\nOver these {} (scene, target) pairs, as measured: the variational schemes are \
          clearly faster in {}, a stiff baseline in {}, and {} are within a factor 2.\n",
-        cases.len() * 4,
-        wins.0,
-        wins.1,
-        wins.2
+        pairs, wins.0, wins.1, wins.2
     );
     let failures: Vec<&BaselineRow> = s.baselines.iter().filter(|r| r.failure.is_some()).collect();
     if !failures.is_empty() {
@@ -1009,11 +1064,34 @@ fn section(s: &Summary, cases: &[&dyn Case], grids: &[&Grid], quick: bool) -> St
     md
 }
 
-/// Fixed remarks for the section, written from the full run's numbers.
-const NOTES: &str = "### Remarks\n\n\
-The Galerkin Lobatto schemes and the midpoint rule are symmetric and therefore not \
-L-stable: across a relaxation jump, or on modes with hω ≫ 1, they do not damp the fast \
-components the way BDF does. Where they stay stable they keep the energy balance small, but \
-with steps much larger than the fast time scale the positions can be far from the \
-reference even though the run ends `ok`: `ok` means the run finished with finite values, \
-not that it is accurate. Read `err_final` next to the outcome.";
+/// Fixed remarks for the section, written from the full run's numbers (2026-11 run; the
+/// tables above are regenerated, these words are not).
+const NOTES: &str = "### Remarks (from the full run)\n\n\
+- **The Lobatto schemes are only conditionally stable on stiff oscillations.** With Lobatto \
+quadrature the Galerkin schemes are of partitioned Lobatto IIIA–IIIB type (lobatto2 is \
+Störmer–Verlet), so on the stiff chain lobatto2 and lobatto3 blow up for hω from about 3 to \
+300 (`failed:non_finite_model`, `failed:newton_singular_jacobian`) and at hω ≈ 1000 finish \
+their single step `ok` but wrong (|q| ≈ 2·10³ from 0.02). The midpoint rule stays bounded at \
+every hω. None of these schemes is L-stable: they do not damp what they do not resolve.\n\
+- **Relaxation jumps are where forced-vi loses.** On `stiff_van_der_pol` (μ = 10³) no scheme \
+gets through the first jump with h ≥ 0.2, even with 64 substeps; from h = 0.1 down to about \
+2e-3 the runs finish (mostly after subdivision) but the jump lands at the wrong time and the \
+final error is O(1) (`wrong` above). Accurate results need h ≤ 5e-4 (4·10⁶ steps and more), \
+and BDF reaches the same errors roughly 10⁴ times faster. The variational schemes only reach \
+errors (≈ 1e-9 with lobatto4 at h = 1e-4, 2·10⁷ steps) that BDF does not reach at any \
+tolerance it accepts.\n\
+- **Hairer's scaled form with μ = 10⁶ is out of reach.** No variational run finishes with a \
+useful answer: lobatto2 finishes every run with a wrong state, the others stop with Newton \
+failures. Many of those failures (midpoint at every h, lobatto3/4 at small h) report a final \
+residual of 1e-13 to 1e-17, i.e. converged to round-off: the runtime's convergence test is \
+stricter than the round-off of these steps (the momentum scale is ~10⁻⁶ while the Jacobian \
+is ~μh), so subdivision cannot help. BDF succeeds at tol ≤ 1e-5 and ESDIRK34 only at \
+tol ≤ 1e-8.\n\
+- **Mildly stiff problems are a draw.** On the over-damped oscillator (ζ = 100, hλ up to 200) \
+and on the coupled van der Pol with amplitudes ×100 every run is `ok` at every h from 1 to \
+5e-5, and the cheapest run to a given error is within a factor of about 3 of the stiff \
+baselines either way; these runs take microseconds to milliseconds, so timing noise matters.\n\
+- **`ok` is not `accurate`.** The runtime sees finite values and a converged Newton solve; \
+it cannot see a run that is stable but wrong. The `wrong` column and `err_final` do. Where the \
+midpoint rule finishes, its energy balance stays at 1e-6 or below even when the trajectory \
+is wrong, so a small energy-balance error is no evidence of accuracy either.";
