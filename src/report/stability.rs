@@ -977,7 +977,8 @@ fn section(s: &Summary, cases: &[&dyn Case], grids: &[&Grid], quick: bool) -> St
     for c in cases {
         for target in [1e-2, 1e-4, 1e-6, 1e-8] {
             // Targets within 10x of the reference's own error are not measurable.
-            if !(c.accuracy() * 10.0 <= target) {
+            let measurable = c.accuracy() * 10.0 <= target;
+            if !measurable {
                 let _ = writeln!(
                     w,
                     "| `{}` | {:.0e} | not measurable: the reference is only good to about {:.0e} | | | |",
