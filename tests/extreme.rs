@@ -12,7 +12,10 @@ fn cvdp_run(h: f64, t_final: f64, init: InitialState<2>) -> Result<Trajectory<2>
     let model = CoupledVanDerPol::PAPER;
     match Integrator::new(&model, Scheme::lobatto(3).unwrap(), h) {
         Ok(i) => i.run(init, t_final),
-        Err(error) => Err(RunFailure { error, trajectory: Trajectory::default() }),
+        Err(error) => Err(RunFailure {
+            error,
+            trajectory: Trajectory::default(),
+        }),
     }
 }
 
@@ -33,7 +36,11 @@ fn extreme_bad_step_size() {
 fn extreme_bad_final_time() {
     for t in [-1.0, f64::NAN, f64::INFINITY] {
         let f = cvdp_run(0.1, t, paper_init()).unwrap_err();
-        assert!(matches!(f.error, Error::InvalidFinalTime { .. }), "{t}: {}", f.error);
+        assert!(
+            matches!(f.error, Error::InvalidFinalTime { .. }),
+            "{t}: {}",
+            f.error
+        );
     }
     // Zero is a valid final time: just the initial record.
     let run = cvdp_run(0.1, 0.0, paper_init()).unwrap();
@@ -43,9 +50,21 @@ fn extreme_bad_final_time() {
 #[test]
 fn extreme_non_finite_initial_data() {
     let cases = [
-        (InitialState::from_velocity([f64::NAN, 0.0], [0.0, 0.0]), "q", 0),
-        (InitialState::from_velocity([0.0, 0.0], [0.0, f64::INFINITY]), "v", 1),
-        (InitialState::from_momentum([0.0, 0.0], [f64::NEG_INFINITY, 0.0]), "p", 0),
+        (
+            InitialState::from_velocity([f64::NAN, 0.0], [0.0, 0.0]),
+            "q",
+            0,
+        ),
+        (
+            InitialState::from_velocity([0.0, 0.0], [0.0, f64::INFINITY]),
+            "v",
+            1,
+        ),
+        (
+            InitialState::from_momentum([0.0, 0.0], [f64::NEG_INFINITY, 0.0]),
+            "p",
+            0,
+        ),
     ];
     for (init, what, index) in cases {
         let f = cvdp_run(0.1, 1.0, init).unwrap_err();
@@ -56,10 +75,18 @@ fn extreme_non_finite_initial_data() {
 
 #[test]
 fn extreme_non_finite_parameter() {
-    let model = CoupledVanDerPol { eps: 0.5, rho: f64::NAN, lambda: 0.8 };
+    let model = CoupledVanDerPol {
+        eps: 0.5,
+        rho: f64::NAN,
+        lambda: 0.8,
+    };
     let err = Integrator::new(&model, Scheme::midpoint(), 0.1).unwrap_err();
     assert_eq!(err, Error::NonFiniteParameter { name: "rho" });
-    let model = CoupledVanDerPol { eps: f64::INFINITY, rho: 0.0, lambda: 0.8 };
+    let model = CoupledVanDerPol {
+        eps: f64::INFINITY,
+        rho: 0.0,
+        lambda: 0.8,
+    };
     let err = Integrator::new(&model, Scheme::midpoint(), 0.1).unwrap_err();
     assert_eq!(err, Error::NonFiniteParameter { name: "eps" });
 }
@@ -67,12 +94,18 @@ fn extreme_non_finite_parameter() {
 #[test]
 fn extreme_singular_mass_from_parameters() {
     // M = [[1, 1], [1, 1]] makes L degenerate in v.
-    let model = TwoMasses { m: [[1.0, 1.0], [1.0, 1.0]] };
+    let model = TwoMasses {
+        m: [[1.0, 1.0], [1.0, 1.0]],
+    };
     let f = Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.1)
         .unwrap()
         .run(InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]), 1.0)
         .unwrap_err();
-    assert!(matches!(f.error, Error::SingularMassMatrix { step: 0, .. }), "{}", f.error);
+    assert!(
+        matches!(f.error, Error::SingularMassMatrix { step: 0, .. }),
+        "{}",
+        f.error
+    );
 }
 
 /// `L = ½vᵀMv − ½|q|²`.
@@ -112,13 +145,18 @@ fn extreme_mass_becomes_singular_mid_run() {
         .unwrap_err();
     eprintln!("{}", f.error);
     assert!(
-        matches!(f.error, Error::SingularMassMatrix { .. } | Error::NewtonFailed { .. }),
+        matches!(
+            f.error,
+            Error::SingularMassMatrix { .. } | Error::NewtonFailed { .. }
+        ),
         "{}",
         f.error
     );
     let kept = &f.trajectory.records;
     assert!(kept.len() > 5, "the steps before the failure are kept");
-    assert!(kept.iter().all(|r| r.q[0].abs() < 0.5 && r.energy.is_finite()));
+    assert!(kept
+        .iter()
+        .all(|r| r.q[0].abs() < 0.5 && r.energy.is_finite()));
 }
 
 /// A force that is NaN for `q > 1`.
@@ -147,7 +185,11 @@ fn extreme_force_returns_nan_mid_run() {
         }
         ref e => panic!("expected NonFiniteModel, got {e}"),
     }
-    assert!(f.trajectory.records.iter().all(|r| r.q[0].is_finite() && r.q[0] <= 1.0));
+    assert!(f
+        .trajectory
+        .records
+        .iter()
+        .all(|r| r.q[0].is_finite() && r.q[0] <= 1.0));
 }
 
 #[test]
@@ -160,7 +202,12 @@ fn extreme_newton_does_not_converge() {
         .run(paper_init(), 2.0)
         .unwrap_err();
     match f.error {
-        Error::NewtonFailed { step, t, residual, failure } => {
+        Error::NewtonFailed {
+            step,
+            t,
+            residual,
+            failure,
+        } => {
             assert_eq!(step, 1);
             assert_eq!(t, 0.0);
             assert!(residual.is_finite());
@@ -178,7 +225,10 @@ fn extreme_huge_step_is_finite_or_typed() {
     for s in 2..=5 {
         for h in [1.0, 2.0, 5.0] {
             match cvdp_run(h, 20.0, paper_init()) {
-                Ok(run) => assert!(run.records.iter().all(|r| r.q.iter().all(|x| x.is_finite()))),
+                Ok(run) => assert!(run
+                    .records
+                    .iter()
+                    .all(|r| r.q.iter().all(|x| x.is_finite()))),
                 Err(f) => {
                     assert!(f.trajectory.records.iter().all(|r| r.energy.is_finite()));
                     eprintln!("lobatto{s} h={h}: {}", f.error);
