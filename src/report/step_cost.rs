@@ -720,8 +720,10 @@ fn section(s: &Summary, quick: bool, plot: Option<&str>) -> String {
          Times are medians over repeats of whole `for_each_step` runs at h = 0.01 from the \
          paper's initial state, divided by the steps; generated (`#[forced_lagrangian]`) and \
          hand-written (`forced_vi_scenes::handwritten`, analytic kernels) runs alternate and \
-         share the stepper, predictor, Newton options (defaults: full Newton, rtol 1e-12) and \
-         tolerances. The machine has two cores shared with other jobs, so expect a few per \
+         share the stepper, predictor, Newton options (`NewtonOptions::default()`) and \
+         tolerances. Built with the plain release profile: a fat-LTO, one-codegen-unit build \
+         of the same code measured the same within noise (the hot path is generic code \
+         monomorphised in this crate anyway), so the workspace adds no profile settings. The machine has two cores shared with other jobs, so expect a few per \
          cent of noise{}.\n",
         if quick { " --quick" } else { "" },
         s.elapsed,
@@ -925,7 +927,9 @@ fn section(s: &Summary, quick: bool, plot: Option<&str>) -> String {
             md,
             "\nFitted growth beyond n = 32: time per step ∝ n^{e:.2}, against the target n^1.2: {}. \
              Meeting it needs a block-banded or sparse Jacobian and a sparse LU (the issue \
-             suggests faer `sp_lu`), which this dense runtime does not have.",
+             suggests faer `sp_lu`), which this dense runtime does not have, and first of all a kernel for array models \
+             that differentiates each Lagrangian term over the few coordinates it touches \
+             instead of all n at once.",
             met(*e <= 1.2)
         );
     }
