@@ -303,7 +303,10 @@ impl Newton {
         let o = self.opts;
         let res_tol = o.residual_tol * residual_scale.max(f64::MIN_POSITIVE);
         // Below this level residuals are round-off and need not decrease.
-        let res_floor = 64.0 * f64::EPSILON * residual_scale;
+        // The residual is a sum of terms of size up to about |J|·|z| (and the caller's
+        // scale), which may cancel: its round-off is 64 ulp of the larger.
+        let mut res_floor = 64.0 * f64::EPSILON * residual_scale;
+        let mut jac_scale = 0.0f64;
         sys.residual(z, &mut self.r)?;
         let mut rnorm = max_norm(&self.r);
         if !rnorm.is_finite() {
@@ -319,7 +322,13 @@ impl Newton {
                 sys.jacobian(z, &mut self.jac)?;
                 self.lu.factor(&self.jac)?;
                 self.have_factors = true;
+                jac_scale = self
+                    .jac
+                    .as_slice()
+                    .iter()
+                    .fold(0.0f64, |m, x| m.max(x.abs()));
             }
+            res_floor = res_floor.max(64.0 * f64::EPSILON * jac_scale * max_norm(z));
             self.dz.as_mut_slice().copy_from_slice(self.r.as_slice());
             self.lu.solve_in_place(&mut self.dz);
             self.dz.neg_mut();
@@ -391,7 +400,10 @@ impl Newton {
                 f64::INFINITY
             };
             let tol = o.rtol * max_norm(z) + o.atol;
-            if err_estimate <= tol && rnorm <= res_tol && halvings == 0 {
+            // A residual at the round-off floor cannot be reduced further: the iterate is as
+            // exact as the problem's conditioning allows, even if the increments are noise.
+            let at_floor = rnorm <= res_floor && it > 1;
+            if (err_estimate <= tol && rnorm <= res_tol && halvings == 0) || at_floor {
                 return Ok(NewtonReport {
                     iterations: it,
                     residual: rnorm,
