@@ -142,6 +142,9 @@ pub struct Integrator<'m, M, const N: usize> {
 }
 
 impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
+    /// The most subdivision levels a step may use: 2²⁰ substeps.
+    pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
+
     /// An integrator with step `h`. Defaults: [`StepOptions::default`].
     ///
     /// Fails if `h` is not positive and finite or a model parameter is not finite.
@@ -167,10 +170,11 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         self
     }
 
-    /// Allows a failed step to be retried as up to `2^levels` substeps.
+    /// Allows a failed step to be retried as up to `2^levels` substeps; `levels` is capped
+    /// at [`Self::MAX_SUBDIVISION_LEVELS`].
     #[must_use]
     pub fn max_subdivisions(mut self, levels: u32) -> Self {
-        self.options.max_subdivisions = levels;
+        self.options.max_subdivisions = levels.min(Self::MAX_SUBDIVISION_LEVELS);
         self
     }
 
@@ -677,7 +681,11 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let snap = self.snapshot();
         let mut iters = 0;
         let mut last_failure = None;
-        for level in 0..=self.options.max_subdivisions {
+        for level in 0..=self
+            .options
+            .max_subdivisions
+            .min(Integrator::<M, N>::MAX_SUBDIVISION_LEVELS)
+        {
             let parts = 1usize << level;
             let hs = h / parts as f64;
             let mut outcome = Ok(0.0);
