@@ -12,6 +12,14 @@ pub enum SchemeError {
     /// Lobatto needs at least two control points.
     #[error("lobatto needs s >= 2 stages, got {0}")]
     TooFewStages(usize),
+    /// More Lobatto stages than [`crate::scheme::MAX_STAGES`].
+    #[error("lobatto supports at most {max} stages, got {requested}")]
+    TooManyStages {
+        /// The requested number of stages (saturated at `usize::MAX`).
+        requested: usize,
+        /// The cap.
+        max: usize,
+    },
     /// The α-rule needs `0 ≤ α ≤ 1`.
     #[error("alpha must be a finite number in [0, 1], got {0}")]
     AlphaOutOfRange(f64),
@@ -82,6 +90,13 @@ pub enum Error {
         /// The parameter's name.
         name: &'static str,
     },
+    /// The model cannot be evaluated as written (for example, an array index out of range
+    /// for this length); found by [`crate::ForcedLagrangian::check_model`].
+    #[error("invalid model: {message}")]
+    InvalidModel {
+        /// What is wrong, in the model's own terms.
+        message: String,
+    },
     /// The initial data contain NaN or infinity.
     #[error("initial {what}[{index}] is not finite")]
     NonFiniteInitialData {
@@ -133,6 +148,7 @@ impl Error {
             Error::InvalidFinalTime { .. } => "invalid_final_time".into(),
             Error::NonFiniteParameter { .. } => "non_finite_parameter".into(),
             Error::NonFiniteInitialData { .. } => "non_finite_initial_data".into(),
+            Error::InvalidModel { .. } => "invalid_model".into(),
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
             Error::NonFiniteModel { .. } => "non_finite_model".into(),
             Error::NewtonFailed { failure, .. } => format!("newton_{}", failure.kind()),

@@ -155,6 +155,9 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         model
             .check_parameters()
             .map_err(|name| Error::NonFiniteParameter { name })?;
+        model
+            .check_model()
+            .map_err(|message| Error::InvalidModel { message })?;
         Ok(Integrator {
             model,
             scheme,
@@ -598,7 +601,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let s = sch.stages();
         let d = sch.d();
         for (j, &dj) in d.iter().enumerate().skip(1) {
-            let zj = if self.has_prev {
+            let zj = if self.has_prev && sch.extrapolates() {
                 let same = h == self.h_prev;
                 let tau = 1.0 + dj * h / self.h_prev;
                 let mut x = -self.z_prev[s - 1];

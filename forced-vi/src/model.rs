@@ -106,8 +106,22 @@ pub trait ForcedLagrangian<const N: usize> {
         [D::from(0.0); N]
     }
 
+    /// Stack bytes that one call of a node kernel may need. The integrator runs the
+    /// kernels on a stack at least this deep (growing it on the heap when the caller's is
+    /// too shallow), so a large model cannot overflow a 2 MiB thread stack. The default
+    /// bounds the general dual-number kernels of [`general`]; the macro sets it from the
+    /// dual numbers its own kernels use.
+    const KERNEL_STACK_BYTES: usize = general::stack_bytes::<N>();
+
     /// Checks the model's parameters; the name of the first non-finite one is the error.
     fn check_parameters(&self) -> Result<(), &'static str> {
+        Ok(())
+    }
+
+    /// Checks what the compiler could not see, such as array indices against a length
+    /// that is a const parameter. The message says what is wrong; [`crate::Integrator::new`]
+    /// returns it as [`crate::Error::InvalidModel`].
+    fn check_model(&self) -> Result<(), String> {
         Ok(())
     }
 
@@ -157,6 +171,17 @@ pub mod general {
     use num_dual::{
         gradient, hessian, jacobian, partial_hessian, Dual2SVec64, DualSVec64, HyperDualSVec64,
     };
+
+    /// A bound on the stack that [`node_jacobian`] needs: a few arrays of `N` hyper-dual
+    /// numbers over `N + N` directions, and the node blocks.
+    pub const fn stack_bytes<const N: usize>() -> usize {
+        let dual = std::mem::size_of::<HyperDualSVec64<N, N>>();
+        let dual2 = std::mem::size_of::<Dual2SVec64<N>>();
+        let big = if dual > dual2 { dual } else { dual2 };
+        let arrays = N.saturating_mul(big).saturating_mul(8);
+        let blocks = std::mem::size_of::<NodeJacobian<N>>().saturating_mul(16);
+        arrays.saturating_add(blocks).saturating_add(64 * 1024)
+    }
 
     fn arr<T: Copy + nalgebra::Scalar, const N: usize>(x: &SVector<T, N>) -> [T; N] {
         std::array::from_fn(|i| x[i])

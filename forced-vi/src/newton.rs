@@ -80,6 +80,31 @@ impl NewtonOptions {
     }
 }
 
+impl NewtonOptions {
+    /// Checks the options: tolerances finite and non-negative (the residual tolerance
+    /// positive), at least one and at most 10 000 iterations, at most 64 halvings. The `Err`
+    /// names the offending field and its value.
+    pub fn validate(&self) -> Result<(), (&'static str, f64)> {
+        let nonneg = |x: f64| x.is_finite() && x >= 0.0;
+        if !nonneg(self.rtol) {
+            return Err(("rtol", self.rtol));
+        }
+        if !nonneg(self.atol) {
+            return Err(("atol", self.atol));
+        }
+        if !(self.residual_tol.is_finite() && self.residual_tol > 0.0) {
+            return Err(("residual_tol", self.residual_tol));
+        }
+        if !(1..=10_000).contains(&self.max_iterations) {
+            return Err(("max_iterations", self.max_iterations as f64));
+        }
+        if self.max_backtracks > 64 {
+            return Err(("max_backtracks", self.max_backtracks as f64));
+        }
+        Ok(())
+    }
+}
+
 /// Simplified Newton refreshes its Jacobian when the contraction rate exceeds this.
 const THETA_REFRESH: f64 = 1e-2;
 
@@ -92,6 +117,9 @@ pub struct NewtonReport {
     pub residual: f64,
     /// Line-search halvings taken in total.
     pub backtracks: usize,
+    /// The bound that `residual` met: `max(residual_tol · scale, 64 ε (scale + |J| · |z|))`
+    /// at the accepted iterate (see [`Newton::solve`]).
+    pub residual_bound: f64,
 }
 
 /// LU with partial pivoting, in place in a buffer made once.
@@ -242,6 +270,12 @@ pub struct Newton {
     last_iterations: usize,
 }
 
+/// The round-off level of a residual whose terms, of size `scale` and `|J| · |z|`, cancel.
+#[inline]
+pub fn round_off_floor(scale: f64, jac_scale: f64, z_norm: f64) -> f64 {
+    64.0 * f64::EPSILON * (scale + jac_scale * z_norm)
+}
+
 /// Max-norm that propagates NaN (unlike `f64::max`).
 fn max_norm(x: &DVector<f64>) -> f64 {
     let mut m = 0.0f64;
@@ -290,10 +324,20 @@ impl Newton {
 
     /// Solves `R(z) = 0` from the initial guess in `z`, overwriting it.
     ///
-    /// `residual_scale` sets the units of the residual test (`|R| ≤ residual_tol · scale`).
-    /// Convergence needs both a small estimated error in `z`, from the contraction rate
-    /// `θ = |Δz_k| / |Δz_{k−1}|` as in Hairer's codes, and a small residual. A step that
-    /// does not reduce the residual is halved (line search); repeated growth is divergence.
+    /// `residual_scale` sets the units of the residual test. Convergence needs both a small
+    /// estimated error in `z`, from the contraction rate `θ = |Δz_k| / |Δz_{k−1}|` as in
+    /// Hairer's codes, and a small residual. A step that does not reduce the residual is
+    /// halved (line search); repeated growth is divergence.
+    ///
+    /// An `Ok` iterate `z` (max-norms throughout) satisfies the stated bound
+    ///
+    /// `|R(z)| ≤ max(residual_tol · scale, 64 ε (scale + |J| · |z|))`
+    ///
+    /// where `|J|` is the largest entry of the last Jacobian. The second term is the
+    /// round-off floor of a residual whose terms, of size `scale` and `|J|·|z|` at the
+    /// solution, cancel. It is computed from the accepted iterate itself, never from the
+    /// initial guess, so a huge guess cannot widen it. Unless the residual is at that floor,
+    /// the estimated error of `z` is also below `rtol · |z| + atol`.
     pub fn solve<S: NonlinearSystem>(
         &mut self,
         sys: &mut S,
@@ -301,11 +345,8 @@ impl Newton {
         residual_scale: f64,
     ) -> Result<NewtonReport, NewtonFailure> {
         let o = self.opts;
-        let res_tol = o.residual_tol * residual_scale.max(f64::MIN_POSITIVE);
-        // Below this level residuals are round-off and need not decrease.
-        // The residual is a sum of terms of size up to about |J|·|z| (and the caller's
-        // scale), which may cancel: its round-off is 64 ulp of the larger.
-        let mut res_floor = 64.0 * f64::EPSILON * residual_scale;
+        let scale = residual_scale.max(f64::MIN_POSITIVE);
+        let res_tol = o.residual_tol * scale;
         let mut jac_scale = 0.0f64;
         sys.residual(z, &mut self.r)?;
         let mut rnorm = max_norm(&self.r);
@@ -328,7 +369,8 @@ impl Newton {
                     .iter()
                     .fold(0.0f64, |m, x| m.max(x.abs()));
             }
-            res_floor = res_floor.max(64.0 * f64::EPSILON * jac_scale * max_norm(z));
+            // Below this level residuals at the current iterate are round-off.
+            let res_floor = round_off_floor(scale, jac_scale, max_norm(z));
             self.dz.as_mut_slice().copy_from_slice(self.r.as_slice());
             self.lu.solve_in_place(&mut self.dz);
             self.dz.neg_mut();
@@ -402,12 +444,13 @@ impl Newton {
             let tol = o.rtol * max_norm(z) + o.atol;
             // A residual at the round-off floor cannot be reduced further: the iterate is as
             // exact as the problem's conditioning allows, even if the increments are noise.
-            let at_floor = rnorm <= res_floor && it > 1;
+            let at_floor = it > 1 && rnorm <= round_off_floor(scale, jac_scale, max_norm(z));
             if (err_estimate <= tol && rnorm <= res_tol && halvings == 0) || at_floor {
                 return Ok(NewtonReport {
                     iterations: it,
                     residual: rnorm,
                     backtracks,
+                    residual_bound: res_tol.max(round_off_floor(scale, jac_scale, max_norm(z))),
                 });
             }
             if o.simplified && (it == 1 || theta > THETA_REFRESH) {
@@ -481,6 +524,115 @@ mod tests {
         assert!((b - x).amax() < 1e-14);
         let s = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]);
         assert_eq!(lu_err(&s), Some(NewtonFailure::SingularJacobian));
+    }
+
+    /// `R(z) = A z − b + c · z³` (componentwise cube), for linear (`c = 0`) and nonlinear
+    /// systems.
+    struct Poly {
+        a: DMatrix<f64>,
+        b: DVector<f64>,
+        c: f64,
+    }
+    impl NonlinearSystem for Poly {
+        fn residual(
+            &mut self,
+            z: &DVector<f64>,
+            r: &mut DVector<f64>,
+        ) -> Result<(), NewtonFailure> {
+            r.copy_from(&(&self.a * z - &self.b + z.map(|x| self.c * x * x * x)));
+            Ok(())
+        }
+        fn jacobian(
+            &mut self,
+            z: &DVector<f64>,
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), NewtonFailure> {
+            j.copy_from(&self.a);
+            for i in 0..z.len() {
+                j[(i, i)] += 3.0 * self.c * z[i] * z[i];
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn trust_newton_huge_guess_is_not_accepted_early() {
+        // The reproducer: the floor used to come from |J|·|z| of the 1e30 guess.
+        let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.999, 0.999, 1.0]);
+        let b = DVector::from_vec(vec![1.0, 2.0]);
+        let exact = a.clone().lu().solve(&b).unwrap();
+        let mut sys = Poly { a, b, c: 0.0 };
+        for simplified in [true, false] {
+            let mut n = Newton::new(2, NewtonOptions::default().simplified(simplified));
+            let mut z = DVector::from_vec(vec![1e30, -1e30]);
+            match n.solve(&mut sys, &mut z, 1.0) {
+                Ok(rep) => {
+                    assert!((&z - &exact).amax() < 1e-9, "{rep:?} {z}");
+                    assert!(rep.residual <= rep.residual_bound, "{rep:?}");
+                }
+                Err(e) => panic!("a linear system converges: {e}"),
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+        /// Whatever the guess, `solve` meets its stated bound or returns an error; for a
+        /// linear system, the error in `z` is then within `|A⁻¹| · bound`.
+        #[test]
+        fn trust_newton_meets_its_stated_bound_or_fails(
+            n in 1usize..6,
+            entries in proptest::collection::vec(-1.0f64..1.0, 36),
+            rhs in proptest::collection::vec(-1e3f64..1e3, 6),
+            guess in proptest::collection::vec(-1.0f64..1.0, 6),
+            guess_exp in -3i32..=30,
+            cubic in proptest::prop_oneof![proptest::strategy::Just(0.0), -1.0f64..1.0],
+            simplified in proptest::bool::ANY,
+            scale_exp in -3i32..6,
+        ) {
+            let mut a = DMatrix::from_fn(n, n, |i, j| entries[i * 6 + j]);
+            for i in 0..n {
+                a[(i, i)] += 2.0 * a.row(i).abs().sum().max(0.5) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            }
+            let b = DVector::from_fn(n, |i, _| rhs[i]);
+            let mut z = DVector::from_fn(n, |i, _| guess[i] * 10f64.powi(guess_exp));
+            let c = if cubic != 0.0 { cubic * a.abs().max() } else { 0.0 };
+            let mut sys = Poly { a: a.clone(), b: b.clone(), c };
+            let scale = 10f64.powi(scale_exp);
+            let mut solver = Newton::new(n, NewtonOptions::default().simplified(simplified));
+            if let Ok(rep) = solver.solve(&mut sys, &mut z, scale) {
+                let mut r = DVector::zeros(n);
+                sys.residual(&z, &mut r).unwrap();
+                let rn = r.amax();
+                proptest::prop_assert!(rn <= rep.residual_bound * (1.0 + 1e-12), "{rn} > {rep:?}");
+                // The bound is the stated one, from the accepted iterate.
+                let mut j = DMatrix::zeros(n, n);
+                sys.jacobian(&z, &mut j).unwrap();
+                let stated = (1e-9 * scale)
+                    .max(round_off_floor(scale, j.amax(), z.amax()));
+                proptest::prop_assert!(rep.residual_bound <= 4.0 * stated, "{rep:?} vs {stated}");
+                if c == 0.0 {
+                    let inv = a.clone().try_inverse().unwrap();
+                    let exact = &inv * &b;
+                    let bound = inv.abs().row_sum().max() * rep.residual_bound;
+                    proptest::prop_assert!(
+                        (&z - &exact).amax() <= 1.01 * bound + 1e-13 * exact.amax(),
+                        "error {} > {bound}", (&z - &exact).amax()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn options_are_validated() {
+        let o = NewtonOptions::default();
+        assert!(o.validate().is_ok());
+        assert_eq!(o.tolerances(-1.0, 0.0).validate(), Err(("rtol", -1.0)));
+        assert!(o.tolerances(1e-12, f64::NAN).validate().is_err());
+        assert!(o.residual_tol(0.0).validate().is_err());
+        assert!(o.max_iterations(0).validate().is_err());
+        assert!(o.max_iterations(usize::MAX).validate().is_err());
     }
 
     fn lu_err(a: &DMatrix<f64>) -> Option<NewtonFailure> {
