@@ -68,9 +68,11 @@ impl Coord {
     }
 }
 
-/// The velocity of coordinate `x` is `x_dot`.
+/// The velocity of coordinate `x` is `x_dot` (a raw `r#x` is refused by `check`; its
+/// velocity is still a valid name here, `x_dot`).
 pub fn velocity_name(name: &Ident) -> Ident {
-    Ident::new(&format!("{name}_dot"), name.span())
+    use syn::ext::IdentExt;
+    Ident::new(&format!("{}_dot", name.unraw()), name.span())
 }
 
 /// Parses the item and the attribute's arguments. A malformed argument is recorded in `cx`

@@ -8,7 +8,10 @@ use syn::{Expr, Ident, Type};
 
 use crate::ast::{Coord, Force, Model};
 use crate::ctxt::Ctxt;
-use crate::lower::{Env, Group, Idx, Kind, Len, Lowered, Lowerer, Var};
+use crate::lower::{
+    compact, reserved, reserved_message, Env, Group, Idx, IntRange, Kind, Len, Lowered, Lowerer,
+    Var,
+};
 use crate::poly::{Atoms, Extractor, Poly};
 
 /// A checked model, ready for code generation.
@@ -28,7 +31,14 @@ pub struct Checked<'a> {
     /// Opaque constants used by the polynomials.
     pub atoms: Atoms,
     pub constant_mass: bool,
+    /// Some index of the Lagrangian or the force is checked at run time: generate
+    /// `check_model`.
+    pub checked_index: bool,
 }
+
+/// The largest number of coordinates of a model with a literal length (a larger one is
+/// refused at its length): the node blocks are `N × N` matrices on the stack.
+pub const MAX_COORDINATES: usize = 1024;
 
 /// A term of the Lagrangian with its sign applied.
 pub struct Term {
@@ -55,6 +65,8 @@ pub struct ForceFn {
     pub lowered: Lowered,
     /// The coordinate's name.
     pub target_name: String,
+    /// Some index in it is checked at run time.
+    pub checked: bool,
 }
 
 /// One component of the force.
@@ -80,7 +92,9 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         model: model.item.ident.clone(),
     };
     let (_, lagrangian) = model.lagrangian.as_ref()?;
-    let lowered = Lowerer::new(cx, &env, "the Lagrangian").expr(lagrangian);
+    let mut lower_l = Lowerer::new(cx, &env, "the Lagrangian");
+    let lowered = lower_l.expr(lagrangian);
+    let l_checked = lower_l.checked_index.get();
     check_lagrangian_uses_velocity(cx, &env, lagrangian, &lowered);
     let force_fns = model.force.as_ref().map(|f| check_force(cx, &env, f));
     let n = n?;
@@ -113,9 +127,12 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
             (Some(p), true) => p.negated(),
             (p, _) => p,
         };
+        // A polynomial term is differentiated at compile time only if the sum stays
+        // representable and so do its first and second derivatives (an overflowing
+        // coefficient would otherwise be lost); else it takes the dual-number path.
         if let Some(p) = poly.filter(|p| {
             let mut sum = poly_l.clone();
-            sum.add(p).is_some()
+            sum.add(p).is_some() && sum.derivatives_ok(2)
         }) {
             let _ = poly_l.add(&p);
             continue;
@@ -157,7 +174,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
                     let quiet = Ctxt::default();
                     let mut lw = Lowerer::new(&quiet, &env, "the force");
                     if let (Some(i), Some(value)) = (&func.index, index) {
-                        lw.bind_index(i, i64::try_from(value).ok());
+                        lw.bind_index(i, i64::try_from(value).ok().map(IntRange::point));
                     }
                     let lowered = match entry {
                         Some(e) => lw.expr(e),
@@ -170,7 +187,9 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
                         }
                         _ => None,
                     };
-                    let poly = entry.and_then(|e| extractor.poly(e));
+                    let poly = entry
+                        .and_then(|e| extractor.poly(e))
+                        .filter(|p| p.derivatives_ok(1));
                     extractor.index = None;
                     rows.push(Row {
                         row: group.offset + k,
@@ -182,7 +201,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
                 }
             }
             rows.sort_by_key(|r| r.row);
-            debug_assert!(rows.len() == total);
+            let _ = total;
         }
         let uses_q = fns.iter().any(|f| f.lowered.uses.iter().any(|u| !u.vel));
         let uses_v = fns.iter().any(|f| f.lowered.uses.iter().any(|u| u.vel));
@@ -194,6 +213,10 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         }
     });
     let atoms = extractor.atoms;
+    let checked_index = l_checked
+        || force
+            .as_ref()
+            .is_some_and(|f| f.fns.iter().any(|func| func.checked));
     Some(Checked {
         model,
         env,
@@ -204,6 +227,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         force,
         atoms,
         constant_mass,
+        checked_index,
     })
 }
 
@@ -243,8 +267,14 @@ pub fn split_terms<'e>(e: &'e Expr, negative: bool, out: &mut Vec<(bool, &'e Exp
 
 /// Rule: the parameters of a model are its named fields, and each is an `f64`. The code
 /// differentiates with respect to coordinates only, so parameters enter as plain numbers.
+/// Names starting with `__fvi` (and `__D`) are the generated code's own, so a field with
+/// such a name is refused rather than silently shadowed.
 fn check_fields(cx: &Ctxt, model: &Model) {
     for p in &model.params {
+        let name = p.ident.to_string();
+        if reserved(&name) {
+            cx.error_spanned_by(&p.ident, reserved_message(&name));
+        }
         if !is_f64(&p.ty) {
             let ty = &p.ty;
             cx.error_spanned_by(
@@ -252,7 +282,7 @@ fn check_fields(cx: &Ctxt, model: &Model) {
                 format!(
                     "parameter `{}` has type `{}`: the parameters of a model are `f64` fields",
                     p.ident,
-                    quote!(#ty).to_string().replace(' ', "")
+                    compact(&quote!(#ty).to_string())
                 ),
             );
         }
@@ -270,6 +300,10 @@ fn check_generics(cx: &Ctxt, model: &Model) -> Vec<Ident> {
     for param in &model.item.generics.params {
         match param {
             syn::GenericParam::Const(c) => {
+                let name = c.ident.to_string();
+                if reserved(&name) {
+                    cx.error_spanned_by(&c.ident, reserved_message(&name));
+                }
                 if matches!(&c.ty, Type::Path(p) if p.path.is_ident("usize")) {
                     out.push(c.ident.clone());
                 } else {
@@ -304,9 +338,22 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
     }
     let mut seen: HashMap<String, &Ident> = HashMap::new();
     let mut groups = Vec::new();
-    let mut offset = 0;
+    let mut offset: usize = 0;
     for c in coords {
         let name = c.name.to_string();
+        if name.starts_with("r#") {
+            cx.error_spanned_by(
+                &c.name,
+                format!(
+                    "a coordinate cannot be a raw identifier (`{name}`): its velocity is named by appending `_dot`; choose a plain name"
+                ),
+            );
+            continue;
+        }
+        if reserved(&name) {
+            cx.error_spanned_by(&c.name, reserved_message(&name));
+            continue;
+        }
         if seen.contains_key(&name) {
             cx.error_spanned_by(&c.name, format!("duplicate coordinate `{name}`"));
             continue;
@@ -361,7 +408,27 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
             len: len.clone(),
             array,
         });
-        offset += len.literal().unwrap_or(0);
+        match offset
+            .checked_add(len.literal().unwrap_or(0))
+            .filter(|&n| n <= MAX_COORDINATES)
+        {
+            Some(n) => offset = n,
+            None => {
+                cx.error_spanned_by(
+                    c.ty.as_ref().map_or_else(
+                        || {
+                            let name = &c.name;
+                            quote!(#name)
+                        },
+                        |t| quote!(#t),
+                    ),
+                    format!(
+                        "too many coordinates: a model has at most {MAX_COORDINATES} (the node blocks are `N × N` matrices)"
+                    ),
+                );
+                break;
+            }
+        }
     }
     groups
 }
@@ -389,6 +456,15 @@ fn array_len(cx: &Ctxt, c: &Coord, ty: &Type, const_params: &[Ident]) -> Option<
                 cx.error_spanned_by(i, "an array coordinate has at least one entry");
                 None
             }
+            Ok(n) if n > MAX_COORDINATES => {
+                cx.error_spanned_by(
+                    i,
+                    format!(
+                        "array length {n} is too large: a model has at most {MAX_COORDINATES} coordinates (the node blocks are `N × N` matrices)"
+                    ),
+                );
+                None
+            }
             Ok(n) => Some(Len::Lit(n)),
         },
         Expr::Path(p) if p.path.get_ident().is_some_and(|i| const_params.contains(i)) => {
@@ -414,11 +490,11 @@ fn total_len(cx: &Ctxt, model: &Model, groups: &[Group]) -> Option<Len> {
     if groups.is_empty() {
         return None;
     }
-    let mut n = 0;
+    let mut n: usize = 0;
     for g in groups {
-        n += g.len.literal()?;
+        n = n.checked_add(g.len.literal()?)?;
     }
-    Some(Len::Lit(n))
+    (n <= MAX_COORDINATES).then_some(Len::Lit(n))
 }
 
 /// Rule: a regular Lagrangian depends on the velocities; one that names none of them gives
@@ -484,18 +560,34 @@ fn check_force(cx: &Ctxt, env: &Env, force: &Force) -> Vec<ForceFn> {
                 );
             }
             (None, false, value) => {
-                let lowered = Lowerer::new(cx, env, place).expr(value);
+                let mut lw = Lowerer::new(cx, env, place);
+                let lowered = lw.expr(value);
                 fns.push(ForceFn {
                     group: g,
                     index: None,
                     element: None,
                     lowered,
                     target_name: name,
+                    checked: lw.checked_index.get(),
                 });
             }
             (Some(i), true, value) => {
+                let iname = i.to_string();
+                if reserved(&iname) {
+                    cx.error_spanned_by(i, reserved_message(&iname));
+                }
                 let mut lw = Lowerer::new(cx, env, place);
-                lw.bind_index(i, None);
+                // `i` takes every value `0..LEN` (unknown for a const-parameter length).
+                let range = group
+                    .len
+                    .literal()
+                    .and_then(|n| i64::try_from(n).ok())
+                    .map(|n| IntRange {
+                        lo: 0,
+                        hi: n - 1,
+                        exact: true,
+                    });
+                lw.bind_index(i, range);
                 let lowered = lw.expr(value);
                 fns.push(ForceFn {
                     group: g,
@@ -503,6 +595,7 @@ fn check_force(cx: &Ctxt, env: &Env, force: &Force) -> Vec<ForceFn> {
                     element: None,
                     lowered,
                     target_name: name,
+                    checked: lw.checked_index.get(),
                 });
             }
             (None, true, Expr::Array(arr)) => {
@@ -526,13 +619,15 @@ fn check_force(cx: &Ctxt, env: &Env, force: &Force) -> Vec<ForceFn> {
                     continue;
                 }
                 for (k, elem) in arr.elems.iter().enumerate() {
-                    let lowered = Lowerer::new(cx, env, place.clone()).expr(elem);
+                    let mut lw = Lowerer::new(cx, env, place.clone());
+                    let lowered = lw.expr(elem);
                     fns.push(ForceFn {
                         group: g,
                         index: None,
                         element: Some(k),
                         lowered,
                         target_name: name.clone(),
+                        checked: lw.checked_index.get(),
                     });
                 }
             }

@@ -89,6 +89,7 @@ pub fn generate(c: &Checked) -> TokenStream {
     let l_body = lowered_dual(&c.lagrangian);
     let lagrangian = quote! {
         #[inline]
+        #[allow(unused_braces)]
         fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
             #l_bind
             #l_body
@@ -104,6 +105,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         helpers.extend(quote! {
             #[doc(hidden)]
             #[inline(always)]
+            #[allow(unused_braces)]
             fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
                 #bind
                 #body
@@ -120,6 +122,7 @@ pub fn generate(c: &Checked) -> TokenStream {
             helpers.extend(quote! {
                 #[doc(hidden)]
                 #[inline(always)]
+                #[allow(unused_braces)]
                 fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n] #index) -> #d {
                     #bind
                     #body
@@ -144,6 +147,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         };
         force_method = quote! {
             #[inline]
+            #[allow(unused_braces)]
             fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
                 #body
             }
@@ -158,7 +162,33 @@ pub fn generate(c: &Checked) -> TokenStream {
         let s = p.to_string();
         quote!(if !self.#p.is_finite() { return ::core::result::Result::Err(#s); })
     });
-    let kernels = kernels(c);
+    let (kernels, stack) = kernels(c);
+    let stack_bytes = stack
+        .into_iter()
+        .reduce(|a, b| quote!(#fvi::max_usize(#a, #b)));
+    let check_model = c.checked_index.then(|| {
+        let force = c.force.as_ref().map(|_| {
+            quote!(let _ = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &__fvi_z, &__fvi_z);)
+        });
+        quote! {
+            fn check_model(&self) -> ::core::result::Result<(), ::std::string::String> {
+                // Indices that the macro could not prove in range are checked accesses;
+                // one evaluation runs every loop iteration and reports the first that
+                // falls outside.
+                let _ = #fvi::take_index_fault();
+                let __fvi_z = [0.0f64; #n];
+                let _ = <Self as #fvi::ForcedLagrangian<#n>>::lagrangian::<f64>(self, &__fvi_z, &__fvi_z);
+                #force
+                match #fvi::take_index_fault() {
+                    ::core::option::Option::Some(__fvi_what) => ::core::result::Result::Err(::std::format!(
+                        "index `{}` is out of range: the model has {} coordinates",
+                        __fvi_what, #n
+                    )),
+                    ::core::option::Option::None => ::core::result::Result::Ok(()),
+                }
+            }
+        }
+    });
 
     quote! {
         #item
@@ -175,10 +205,12 @@ pub fn generate(c: &Checked) -> TokenStream {
             }
             #lagrangian
             #force_method
+            const KERNEL_STACK_BYTES: usize = #stack_bytes;
             fn check_parameters(&self) -> ::core::result::Result<(), &'static str> {
                 #(#checks)*
                 ::core::result::Result::Ok(())
             }
+            #check_model
             #kernels
         }
 
@@ -202,6 +234,8 @@ pub fn generate(c: &Checked) -> TokenStream {
 }
 
 /// The lowered tokens as a `__D` value, spanned at the user's expression.
+/// In expression position (`identity(...)`), so that a body starting with a block or an
+/// `if` is not read as a statement.
 fn lowered_dual(l: &Lowered) -> TokenStream {
     let span = l
         .tokens
@@ -209,7 +243,17 @@ fn lowered_dual(l: &Lowered) -> TokenStream {
         .into_iter()
         .next()
         .map_or_else(Span::call_site, |t| t.span());
-    l.as_dual(span)
+    let t = l.as_dual(span);
+    let starts_like_statement = match t.clone().into_iter().next() {
+        Some(proc_macro2::TokenTree::Group(g)) => g.delimiter() == proc_macro2::Delimiter::Brace,
+        Some(proc_macro2::TokenTree::Ident(i)) => i == "if" || i == "for",
+        _ => false,
+    };
+    if starts_like_statement && !(l.stmt_like && l.kind == crate::lower::Kind::Dual) {
+        quote!(::core::convert::identity::<__D>(#t))
+    } else {
+        t
+    }
 }
 
 fn coordinate_names(c: &Checked) -> TokenStream {
@@ -302,9 +346,32 @@ fn slot_set(c: &Checked, uses: &BTreeSet<Var>) -> SlotSet {
     SlotSet { q, v }
 }
 
-fn kernels(c: &Checked) -> TokenStream {
+/// Token trees in a stream (an upper bound on the temporaries its code makes).
+fn token_count(t: &TokenStream) -> usize {
+    t.clone()
+        .into_iter()
+        .map(|tt| match tt {
+            proc_macro2::TokenTree::Group(g) => token_count(&g.stream()).saturating_add(1),
+            _ => 1,
+        })
+        .fold(0usize, usize::saturating_add)
+}
+
+/// The kernels, and the stack bound of each helper they call (`kernel_stack_bytes` of the
+/// dual number it uses).
+fn kernels(c: &Checked) -> (TokenStream, Vec<TokenStream>) {
     let fvi = fvi();
     let n = &c.n;
+    let nd = quote!(#fvi::num_dual);
+    let mut stack: Vec<TokenStream> = Vec::new();
+    let base_values = token_count(&c.lagrangian.tokens)
+        .saturating_add(c.force.as_ref().map_or(0, |f| {
+            f.fns.iter().map(|x| token_count(&x.lowered.tokens)).sum()
+        }))
+        .saturating_mul(4)
+        .saturating_add(64);
+    let base_values = lit(base_values);
+    stack.push(quote!(#fvi::kernel_stack_bytes::<f64, #n>(#base_values)));
     let qs = format_ident!("__fvi_qs");
     let vs = format_ident!("__fvi_vs");
     let q = format_ident!("__fvi_q");
@@ -346,10 +413,10 @@ fn kernels(c: &Checked) -> TokenStream {
         let grad_prefix = quote!(.grad);
         let mut first_derivs: BTreeMap<usize, Poly> = BTreeMap::new();
         for &s in &used {
-            let ds = c.poly_l.diff(s);
-            if ds.is_zero() {
+            // `check` kept only polynomials whose derivatives are representable.
+            let Some(ds) = c.poly_l.diff(s).filter(|d| !d.is_zero()) else {
                 continue;
-            }
+            };
             let code = ds.tokens(&c.atoms, &var);
             let target = gs.grad(s, &TokenStream::new());
             g_lines.extend(quote!(#target = #code;));
@@ -359,10 +426,9 @@ fn kernels(c: &Checked) -> TokenStream {
         }
         for (&s, ds) in &first_derivs {
             for &t in &used {
-                let h = ds.diff(t);
-                if h.is_zero() {
+                let Some(h) = ds.diff(t).filter(|h| !h.is_zero()) else {
                     continue;
-                }
+                };
                 let code = h.tokens(&c.atoms, &var);
                 let target = js.hess(s, t);
                 j_lines.extend(quote!(#target = #code;));
@@ -385,10 +451,14 @@ fn kernels(c: &Checked) -> TokenStream {
         let name = format_ident!("__fvi_l{}", k);
         let call = quote!(|__fvi_a, __fvi_b| self.#name(__fvi_a, __fvi_b));
         let set = slot_set(c, &t.lowered.uses);
+        let values = lit(token_count(&t.lowered.tokens)
+            .saturating_mul(4)
+            .saturating_add(64));
         match (&set.q, &set.v, n) {
             (SlotPart::All, _, Len::Param(_)) | (_, SlotPart::All, Len::Param(_)) => {
                 let q_slots = part_tokens(&set.q, n, false);
                 let v_slots = part_tokens(&set.v, n, true);
+                stack.push(quote!(#fvi::kernel_stack_bytes::<#nd::Dual2SVec64<#n>, #n>(#values)));
                 for slots in [&q_slots, &v_slots].into_iter().flatten() {
                     grad_code
                         .extend(quote!(#fvi::term_gradient(&#q, &#v, &#slots, #call, &mut #g);));
@@ -399,6 +469,7 @@ fn kernels(c: &Checked) -> TokenStream {
                         .extend(quote!(#fvi::term_hessian(&#q, &#v, &#slots, #call, &mut #j);));
                 }
                 if q_slots.is_some() && v_slots.is_some() {
+                    stack.push(quote!(#fvi::kernel_stack_bytes::<#nd::HyperDualSVec64<#n, #n>, #n>(#values)));
                     jac_code.extend(quote!(#fvi::term_cross(&#q, &#v, #call, &mut #j);));
                 }
             }
@@ -421,6 +492,8 @@ fn kernels(c: &Checked) -> TokenStream {
                         all
                     }
                 };
+                let kk = lit(all.len());
+                stack.push(quote!(#fvi::kernel_stack_bytes::<#nd::Dual2SVec64<#kk>, #n>(#values)));
                 grad_code
                     .extend(quote!(#fvi::term_gradient(&#q, &#v, &[#(#all),*], #call, &mut #g);));
                 jac_code
@@ -488,10 +561,9 @@ fn kernels(c: &Checked) -> TokenStream {
                             .flat_map(|m| m.iter().map(|&(s, _)| s))
                             .collect();
                         for s in used {
-                            let ds = p.diff(s);
-                            if ds.is_zero() {
+                            let Some(ds) = p.diff(s).filter(|d| !d.is_zero()) else {
                                 continue;
-                            }
+                            };
                             let code = ds.tokens(&c.atoms, &var);
                             let target = js.hess(r.row, s);
                             poly_lines.extend(quote!(#target += #code;));
@@ -505,6 +577,19 @@ fn kernels(c: &Checked) -> TokenStream {
                             quote!(#j.grad.fq[#row] += self.#name::<f64>(&#q, &#v #index);),
                         );
                     } else {
+                        let kk = lit(sl.len());
+                        let values = lit(token_count(
+                            &force
+                                .fns
+                                .get(r.func)
+                                .map(|f| f.lowered.tokens.clone())
+                                .unwrap_or_default(),
+                        )
+                        .saturating_mul(4)
+                        .saturating_add(64));
+                        stack.push(
+                            quote!(#fvi::kernel_stack_bytes::<#nd::DualSVec64<#kk>, #n>(#values)),
+                        );
                         jac_code.extend(quote! {
                             #fvi::force_row(&#q, &#v, &[#(#sl),*], #row,
                                 |__fvi_a, __fvi_b| self.#name(__fvi_a, __fvi_b #index), &mut #j);
@@ -516,6 +601,14 @@ fn kernels(c: &Checked) -> TokenStream {
                 }
             }
             Len::Param(_) => {
+                let values = lit(force
+                    .fns
+                    .iter()
+                    .map(|f| token_count(&f.lowered.tokens))
+                    .fold(0usize, usize::saturating_add)
+                    .saturating_mul(4)
+                    .saturating_add(64));
+                stack.push(quote!(#fvi::kernel_stack_bytes::<#nd::DualSVec64<#n>, #n>(#values)));
                 let call = quote!(|__fvi_a, __fvi_b| <Self as #fvi::ForcedLagrangian<#n>>::force(self, __fvi_a, __fvi_b));
                 if force.uses_q {
                     jac_code
@@ -563,7 +656,7 @@ fn kernels(c: &Checked) -> TokenStream {
     } else {
         quote!(mut)
     };
-    quote_spanned! {Span::call_site()=>
+    let code = quote_spanned! {Span::call_site()=>
         #[inline]
         fn node_gradient(#sig_args) -> #fvi::NodeGradient<#n> {
             #prologue
@@ -588,7 +681,8 @@ fn kernels(c: &Checked) -> TokenStream {
             #mass_code
             #j.e
         }
-    }
+    };
+    (code, stack)
 }
 
 fn part_tokens(part: &SlotPart, n: &Len, vel: bool) -> Option<TokenStream> {

@@ -61,13 +61,17 @@ fn stub_len(model: &Model) -> Option<TokenStream> {
             continue;
         }
         match &c.ty {
-            None => total += 1,
+            None => total = total.checked_add(1)?,
             Some(syn::Type::Array(a)) => {
                 match &a.len {
                     syn::Expr::Lit(syn::ExprLit {
                         lit: syn::Lit::Int(i),
                         ..
-                    }) => total += i.base10_parse::<usize>().ok()?,
+                    }) => {
+                        total = total
+                            .checked_add(i.base10_parse::<usize>().ok()?)
+                            .filter(|&t| t <= crate::check::MAX_COORDINATES)?;
+                    }
                     syn::Expr::Path(p) if coords.len() == 1 => {
                         let ident = p.path.get_ident()?;
                         let is_param =

@@ -50,12 +50,19 @@ impl Atoms {
 }
 
 impl Coef {
-    fn number(x: f64) -> Coef {
+    /// A number; `None` unless finite (an infinite coefficient cannot be written out).
+    fn number(x: f64) -> Option<Coef> {
+        if !x.is_finite() {
+            return None;
+        }
         let mut m = BTreeMap::new();
         if x != 0.0 {
             m.insert(Vec::new(), x);
         }
-        Coef(m)
+        Some(Coef(m))
+    }
+    fn zero() -> Coef {
+        Coef(BTreeMap::new())
     }
     fn atom(id: usize) -> Coef {
         Coef(BTreeMap::from([(vec![id], 1.0)]))
@@ -84,19 +91,25 @@ impl Coef {
         }
         (self.0.len() <= MAX_COEF_TERMS).then_some(())
     }
+    /// The product; `None` if a coefficient overflows or underflows (a product of nonzero
+    /// numbers that is not a normal `f64` would lose the term or its precision).
     fn mul(&self, o: &Coef) -> Option<Coef> {
-        let mut out = Coef(BTreeMap::new());
+        let mut out = Coef::zero();
         for (ka, xa) in &self.0 {
             for (kb, xb) in &o.0 {
                 let mut k: Vec<usize> = ka.iter().chain(kb).copied().collect();
                 k.sort_unstable();
-                out.add(&Coef(BTreeMap::from([(k, xa * xb)])))?;
+                let x = xa * xb;
+                if !x.is_normal() {
+                    return None;
+                }
+                out.add(&Coef(BTreeMap::from([(k, x)])))?;
             }
         }
         Some(out)
     }
     fn scale(&self, x: f64) -> Option<Coef> {
-        self.mul(&Coef::number(x))
+        self.mul(&Coef::number(x)?)
     }
 
     /// The coefficient as an `f64` expression (atoms by their tokens).
@@ -108,7 +121,9 @@ impl Coef {
             let mut factors: Vec<TokenStream> =
                 ids.iter().map(|&i| atoms.tokens[i].clone()).collect();
             if mag != 1.0 || factors.is_empty() {
-                factors.insert(0, Literal::f64_unsuffixed(mag).into_token_stream());
+                // Coefficients are finite by construction (`Coef::number`, `Coef::mul`).
+                let mag = if mag.is_finite() { mag } else { f64::NAN };
+                factors.insert(0, f64_literal(mag));
             }
             let mut it = factors.into_iter();
             let mut term = it.next().unwrap_or_else(|| quote!(1.0));
@@ -143,12 +158,15 @@ impl Poly {
         Poly(m)
     }
     fn var(slot: usize) -> Poly {
-        Poly(BTreeMap::from([(vec![(slot, 1)], Coef::number(1.0))]))
+        Poly(BTreeMap::from([(
+            vec![(slot, 1)],
+            Coef(BTreeMap::from([(Vec::new(), 1.0)])),
+        )]))
     }
     /// The coefficient, if the polynomial is constant.
     fn as_constant(&self) -> Option<Coef> {
         match self.0.len() {
-            0 => Some(Coef::number(0.0)),
+            0 => Some(Coef::zero()),
             1 => self.0.get(&Vec::new()).cloned(),
             _ => None,
         }
@@ -158,7 +176,7 @@ impl Poly {
     }
     pub fn add(&mut self, o: &Poly) -> Option<()> {
         for (m, c) in &o.0 {
-            let e = self.0.entry(m.clone()).or_insert_with(|| Coef::number(0.0));
+            let e = self.0.entry(m.clone()).or_insert_with(Coef::zero);
             e.add(c)?;
             if e.is_zero() {
                 self.0.remove(m);
@@ -171,7 +189,7 @@ impl Poly {
         self.neg()
     }
     fn neg(&self) -> Option<Poly> {
-        self.scale(&Coef::number(-1.0))
+        self.scale(&Coef::number(-1.0)?)
     }
     fn scale(&self, c: &Coef) -> Option<Poly> {
         let mut out = Poly::default();
@@ -193,26 +211,42 @@ impl Poly {
         }
         Some(out)
     }
-    /// `∂/∂(slot)`.
-    pub fn diff(&self, slot: usize) -> Poly {
+    /// `∂/∂(slot)`; `None` if a coefficient of the derivative overflows.
+    pub fn diff(&self, slot: usize) -> Option<Poly> {
         let mut out = Poly::default();
         for (m, c) in &self.0 {
             let Some(pos) = m.iter().position(|&(s, _)| s == slot) else {
                 continue;
             };
-            let e = m[pos].1;
             let mut dm = m.clone();
+            let e = dm.get(pos)?.1;
             if e == 1 {
                 dm.remove(pos);
-            } else {
-                dm[pos].1 = e - 1;
+            } else if let Some(entry) = dm.get_mut(pos) {
+                entry.1 = e - 1;
             }
-            if let Some(dc) = c.scale(f64::from(e)) {
-                // Scaling by a small integer cannot overflow a finite coefficient.
-                let _ = out.add(&Poly(BTreeMap::from([(dm, dc)])));
-            }
+            let dc = c.scale(f64::from(e))?;
+            out.add(&Poly(BTreeMap::from([(dm, dc)])))?;
         }
-        out
+        Some(out)
+    }
+    /// The variables (slots) that occur.
+    pub fn slots(&self) -> std::collections::BTreeSet<usize> {
+        self.0
+            .keys()
+            .flat_map(|m| m.iter().map(|&(s, _)| s))
+            .collect()
+    }
+    /// Whether every derivative up to `order` has representable coefficients, so that the
+    /// compile-time derivatives lose nothing.
+    pub fn derivatives_ok(&self, order: u32) -> bool {
+        if order == 0 {
+            return true;
+        }
+        self.slots().into_iter().all(|s| match self.diff(s) {
+            Some(d) => d.derivatives_ok(order - 1),
+            None => false,
+        })
     }
     /// The monomials.
     pub fn monomials(&self) -> impl Iterator<Item = &Monomial> {
@@ -230,7 +264,7 @@ impl Poly {
                 }
             }
             let (neg, c) = match c.as_number() {
-                Some(x) if x < 0.0 => (true, Coef::number(-x)),
+                Some(x) if x < 0.0 => (true, Coef::number(-x).unwrap_or_else(Coef::zero)),
                 _ => (false, c.clone()),
             };
             let is_one = c.as_number() == Some(1.0);
@@ -285,7 +319,13 @@ impl<'a> Extractor<'a> {
     pub fn poly(&mut self, e: &Expr) -> Option<Poly> {
         match e {
             Expr::Lit(l) => match &l.lit {
-                Lit::Float(f) => Some(Poly::constant(Coef::number(f.base10_parse().ok()?))),
+                Lit::Float(f) if f.suffix().is_empty() || f.suffix() == "f64" => {
+                    Some(Poly::constant(Coef::number(f.base10_parse().ok()?)?))
+                }
+                Lit::Int(i) if i.suffix().is_empty() || i.suffix() == "f64" => {
+                    let x: f64 = i.base10_digits().parse().ok()?;
+                    Some(Poly::constant(Coef::number(x)?))
+                }
                 _ => None,
             },
             Expr::Path(p) => {
@@ -321,6 +361,14 @@ impl<'a> Extractor<'a> {
                 _ => None,
             },
             Expr::Binary(b) => {
+                // Integer arithmetic (`3 / 2` is 1) is evaluated as the generated code does.
+                if let Some(k) = self.int(e) {
+                    return Some(Poly::constant(Coef::number(k as f64)?));
+                }
+                if self.int(&b.left).is_some() && self.int(&b.right).is_some() {
+                    // Integer overflow or division by zero: leave it to the generated code.
+                    return None;
+                }
                 let l = self.poly(&b.left)?;
                 let r = self.poly(&b.right)?;
                 match b.op {
@@ -338,7 +386,7 @@ impl<'a> Extractor<'a> {
                     BinOp::Div(_) => {
                         let c = r.as_constant()?;
                         let inv = match c.as_number() {
-                            Some(x) if x != 0.0 => Coef::number(1.0 / x),
+                            Some(x) if x != 0.0 && (1.0 / x).is_normal() => Coef::number(1.0 / x)?,
                             Some(_) => return None,
                             None => {
                                 let right = &b.right;
@@ -355,7 +403,7 @@ impl<'a> Extractor<'a> {
                 if m.method == "powi" && m.args.len() == 1 {
                     let n = self.int(m.args.first()?)?;
                     let n = u32::try_from(n).ok().filter(|&n| n <= MAX_DEGREE)?;
-                    let mut out = Poly::constant(Coef::number(1.0));
+                    let mut out = Poly::constant(Coef::number(1.0)?);
                     for _ in 0..n {
                         out = out.mul(&recv)?;
                     }
@@ -395,7 +443,7 @@ impl<'a> Extractor<'a> {
                     return None;
                 }
                 let k = self.int(&c.expr)?;
-                Some(Poly::constant(Coef::number(k as f64)))
+                Some(Poly::constant(Coef::number(k as f64)?))
             }
             _ => None,
         }
@@ -407,6 +455,11 @@ impl<'a> Extractor<'a> {
             if mentions(&t, i) {
                 return None;
             }
+        }
+        // The user's tokens are emitted as `f64` code: an integer literal there (other
+        // than a `powi` exponent) would not type-check; the dual path converts it.
+        if has_bare_int(&t) {
+            return None;
         }
         Some(Coef::atom(self.atoms.intern(t)))
     }
@@ -433,12 +486,56 @@ impl<'a> Extractor<'a> {
                     BinOp::Add(_) => l.checked_add(r),
                     BinOp::Sub(_) => l.checked_sub(r),
                     BinOp::Mul(_) => l.checked_mul(r),
+                    BinOp::Div(_) => l.checked_div(r),
+                    BinOp::Rem(_) => l.checked_rem(r),
                     _ => None,
                 }
             }
             _ => None,
         }
     }
+}
+
+/// A finite `f64` as an unsuffixed literal (`NaN` stays a valid token).
+fn f64_literal(x: f64) -> TokenStream {
+    if x.is_finite() {
+        Literal::f64_unsuffixed(x).into_token_stream()
+    } else {
+        quote!(::core::primitive::f64::NAN)
+    }
+}
+
+/// Whether `t` has an integer literal other than the argument of `powi(...)`.
+fn has_bare_int(t: &TokenStream) -> bool {
+    let mut prev_powi = false;
+    for tt in t.clone() {
+        let this_powi = matches!(&tt, proc_macro2::TokenTree::Ident(i) if i == "powi");
+        match &tt {
+            proc_macro2::TokenTree::Literal(l) => {
+                let s = l.to_string();
+                let float = s.contains('.')
+                    || s.ends_with("f64")
+                    || ((s.contains('e') || s.contains('E')) && !s.starts_with("0x"));
+                if !float {
+                    return true;
+                }
+            }
+            proc_macro2::TokenTree::Group(g) => {
+                let is_exponent =
+                    prev_powi && g.delimiter() == proc_macro2::Delimiter::Parenthesis && {
+                        let inner: Vec<_> = g.stream().into_iter().collect();
+                        inner.len() == 1
+                            && matches!(inner.first(), Some(proc_macro2::TokenTree::Literal(_)))
+                    };
+                if !is_exponent && has_bare_int(&g.stream()) {
+                    return true;
+                }
+            }
+            _ => {}
+        }
+        prev_powi = this_powi;
+    }
+    false
 }
 
 fn mentions(t: &TokenStream, name: &str) -> bool {

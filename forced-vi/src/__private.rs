@@ -16,8 +16,123 @@ pub use crate::scalar::{lift, Scalar};
 pub use core::primitive::f64;
 pub use nalgebra::{SMatrix, SVector};
 
+use core::cell::Cell;
+
 use num_dual::{gradient, hessian, jacobian, partial_hessian};
 use num_dual::{Dual2SVec64, DualSVec64, HyperDualSVec64};
+
+std::thread_local! {
+    static INDEX_FAULT: Cell<Option<&'static str>> = const { Cell::new(None) };
+}
+
+/// `a[i]`, or NaN when `i` is out of range (never a panic); the first such index expression
+/// `what` is recorded for [`take_index_fault`]. Generated code uses it for every index that the macro
+/// could not prove in range.
+#[inline(always)]
+pub fn at<D: Scalar, I: Int>(a: &[D], i: I, what: &'static str) -> D {
+    match i.to_index().and_then(|k| a.get(k)) {
+        Some(x) => *x,
+        None => {
+            INDEX_FAULT.with(|f| {
+                if f.get().is_none() {
+                    f.set(Some(what));
+                }
+            });
+            D::from(f64::NAN)
+        }
+    }
+}
+
+/// The index expression of the last out-of-range [`at`] on this thread, cleared.
+pub fn take_index_fault() -> Option<&'static str> {
+    INDEX_FAULT.with(|f| f.take())
+}
+
+/// The integers of model code: arithmetic wraps (an index that wraps is out of range, and
+/// [`at`] reports it) instead of panicking.
+pub trait Int: Copy {
+    /// Wrapping `+`.
+    fn wrapping_add_(self, o: Self) -> Self;
+    /// Wrapping `-`.
+    fn wrapping_sub_(self, o: Self) -> Self;
+    /// Wrapping `*`.
+    fn wrapping_mul_(self, o: Self) -> Self;
+    /// `/`, with the type's maximum for a division by zero.
+    fn div_(self, o: Self) -> Self;
+    /// `%`, with the type's maximum for a division by zero.
+    fn rem_(self, o: Self) -> Self;
+    /// The value as an index, if it is one.
+    fn to_index(self) -> Option<usize>;
+}
+
+macro_rules! impl_int {
+    ($($t:ty),*) => {$(
+        impl Int for $t {
+            #[inline(always)]
+            fn wrapping_add_(self, o: Self) -> Self { self.wrapping_add(o) }
+            #[inline(always)]
+            fn wrapping_sub_(self, o: Self) -> Self { self.wrapping_sub(o) }
+            #[inline(always)]
+            fn wrapping_mul_(self, o: Self) -> Self { self.wrapping_mul(o) }
+            #[inline(always)]
+            fn div_(self, o: Self) -> Self { self.checked_div(o).unwrap_or(<$t>::MAX) }
+            #[inline(always)]
+            fn rem_(self, o: Self) -> Self { self.checked_rem(o).unwrap_or(<$t>::MAX) }
+            #[inline(always)]
+            fn to_index(self) -> Option<usize> { usize::try_from(self).ok() }
+        }
+    )*};
+}
+impl_int!(u8, u16, u32, u64, u128, usize, i8, i16, i32, i64, i128, isize);
+
+/// `a + b` in model code.
+#[inline(always)]
+pub fn int_add<I: Int>(a: I, b: I) -> I {
+    a.wrapping_add_(b)
+}
+/// `a - b` in model code.
+#[inline(always)]
+pub fn int_sub<I: Int>(a: I, b: I) -> I {
+    a.wrapping_sub_(b)
+}
+/// `a * b` in model code.
+#[inline(always)]
+pub fn int_mul<I: Int>(a: I, b: I) -> I {
+    a.wrapping_mul_(b)
+}
+/// `a / b` in model code.
+#[inline(always)]
+pub fn int_div<I: Int>(a: I, b: I) -> I {
+    a.div_(b)
+}
+/// `a % b` in model code.
+#[inline(always)]
+pub fn int_rem<I: Int>(a: I, b: I) -> I {
+    a.rem_(b)
+}
+
+/// A bound on the stack of one generated kernel helper whose dual number is `T`: arrays of
+/// `N` of them (the lifted `q` and `v` and their copies), `values` more (the model code's
+/// temporaries) and the node blocks.
+pub const fn kernel_stack_bytes<T, const N: usize>(values: usize) -> usize {
+    let t = core::mem::size_of::<T>();
+    let arrays = t.saturating_mul(N).saturating_mul(16);
+    let temps = t.saturating_mul(values);
+    let blocks = core::mem::size_of::<NodeJacobian<N>>().saturating_mul(8);
+    arrays
+        .saturating_add(temps)
+        .saturating_add(blocks)
+        .saturating_add(256 * 1024)
+}
+
+/// The larger of two sizes (for const expressions).
+pub const fn max_usize(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
 
 /// Zeroed gradient blocks.
 #[inline(always)]
@@ -56,11 +171,13 @@ fn place<D: Scalar, const N: usize, const K: usize>(
 ) -> ([D; N], [D; N]) {
     let mut qd: [D; N] = lift(q);
     let mut vd: [D; N] = lift(v);
+    // A slot out of range (an index beyond a const-generic length) seeds nothing; its
+    // start value and the kernel's output are NaN (see `start` and `poison`).
     for (k, &s) in slots.iter().enumerate() {
-        if s < N {
-            qd[s] = z[k];
-        } else {
-            vd[s - N] = z[k];
+        if let Some(x) = qd.get_mut(s) {
+            *x = z[k];
+        } else if let Some(x) = s.checked_sub(N).and_then(|t| vd.get_mut(t)) {
+            *x = z[k];
         }
     }
     (qd, vd)
@@ -74,11 +191,10 @@ fn start<const N: usize, const K: usize>(
 ) -> SVector<f64, K> {
     SVector::from(core::array::from_fn(|k| {
         let s = slots[k];
-        if s < N {
-            q[s]
-        } else {
-            v[s - N]
-        }
+        q.get(s)
+            .or_else(|| s.checked_sub(N).and_then(|t| v.get(t)))
+            .copied()
+            .unwrap_or(f64::NAN)
     }))
 }
 
@@ -100,6 +216,9 @@ pub fn term_gradient<F, const N: usize, const K: usize>(
         },
         &start(q, v, slots),
     );
+    if poison(slots, out) {
+        return;
+    }
     for (k, &s) in slots.iter().enumerate() {
         if s < N {
             out.fq[s] += g[k];
@@ -107,6 +226,17 @@ pub fn term_gradient<F, const N: usize, const K: usize>(
             out.lv[s - N] += g[k];
         }
     }
+}
+
+/// A slot beyond `2N` (an out-of-range index of the model): the outputs become NaN so that
+/// the runtime reports a non-finite model instead of a wrong derivative.
+fn poison<const N: usize, const K: usize>(slots: &[usize; K], out: &mut NodeGradient<N>) -> bool {
+    let bad = slots.iter().any(|&s| s >= N.saturating_mul(2));
+    if bad {
+        out.fq.fill(f64::NAN);
+        out.lv.fill(f64::NAN);
+    }
+    bad
 }
 
 /// Adds the first and second derivatives of one Lagrangian term over `slots` to the
@@ -128,6 +258,9 @@ pub fn term_hessian<F, const N: usize, const K: usize>(
         },
         &start(q, v, slots),
     );
+    if poison(slots, &mut out.grad) {
+        return;
+    }
     for (k, &s) in slots.iter().enumerate() {
         if s < N {
             out.grad.fq[s] += g[k];
@@ -188,6 +321,10 @@ pub fn force_row<F, const N: usize, const K: usize>(
         },
         &start(q, v, slots),
     );
+    if row >= N || poison(slots, &mut out.grad) {
+        out.grad.fq.fill(f64::NAN);
+        return;
+    }
     out.grad.fq[row] += f;
     for (k, &s) in slots.iter().enumerate() {
         if s < N {
