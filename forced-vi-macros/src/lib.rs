@@ -15,6 +15,8 @@ mod expand;
 mod fallback;
 mod lower;
 mod poly;
+#[cfg(test)]
+mod props;
 
 use proc_macro::TokenStream;
 
