@@ -280,10 +280,11 @@ where
         let (q0, v0) = self.start(member)?;
         let integ = Integrator::new(&self.model, scheme.clone(), h)?;
         let mut last = None;
-        let stats =
-            integ.for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
+        let stats = integ
+            .for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
                 last = Some((r.q, r.p, r.energy));
-            })?;
+            })
+            .map_err(|f| f.error)?;
         let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
             t_final: self.t_final,
         })?;
@@ -332,13 +333,15 @@ where
         let mut out = BalanceSeries::default();
         let mut sampler = Sampler::new(t_final, samples);
         let mut last = (0.0, 0.0);
-        let stats = integ.for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
-            if sampler.take(r.t) {
-                out.t.push(r.t);
-                out.balance.push(r.energy_balance);
-            }
-            last = (r.t, r.energy_balance);
-        })?;
+        let stats = integ
+            .for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
+                if sampler.take(r.t) {
+                    out.t.push(r.t);
+                    out.balance.push(r.energy_balance);
+                }
+                last = (r.t, r.energy_balance);
+            })
+            .map_err(|f| f.error)?;
         if out.t.last() != Some(&last.0) {
             out.t.push(last.0);
             out.balance.push(last.1);

@@ -97,6 +97,37 @@ pub enum Error {
         /// What is wrong, in the model's own terms.
         message: String,
     },
+    /// The Newton options are out of range (a negative or NaN tolerance, say).
+    #[error("newton option `{field}` = {value} is out of range")]
+    InvalidNewtonOptions {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The run would take more steps than the cap ([`crate::StepOptions::max_steps`]).
+    #[error("the run needs {steps:e} steps, more than the cap of {max}")]
+    TooManySteps {
+        /// Steps the run needs (`t_final / h`, as a float: it may exceed `usize`).
+        steps: f64,
+        /// The cap.
+        max: usize,
+    },
+    /// The records of a collecting run do not fit in memory; stream them instead
+    /// ([`crate::Integrator::for_each_step`]).
+    #[error("cannot hold {records} records in memory; stream them with for_each_step")]
+    TooManyRecords {
+        /// Records the run needs.
+        records: usize,
+    },
+    /// The model's node kernels need more stack than the integrator will provide.
+    #[error("the model's node kernels need {stack_bytes} bytes of stack, more than {max}: the model is too large for the dense dual-number path")]
+    ModelTooLarge {
+        /// The model's [`crate::ForcedLagrangian::KERNEL_STACK_BYTES`].
+        stack_bytes: usize,
+        /// The cap.
+        max: usize,
+    },
     /// The initial data contain NaN or infinity.
     #[error("initial {what}[{index}] is not finite")]
     NonFiniteInitialData {
@@ -122,6 +153,29 @@ pub enum Error {
         step: usize,
         /// Its start time.
         t: f64,
+    },
+    /// The velocity solve `L_v(q, v) = p` did not converge.
+    #[error(
+        "velocity solve L_v(q, v) = p failed at step {step}, t = {t} (residual {residual:.3e})"
+    )]
+    VelocitySolveFailed {
+        /// The step (0 for the initial data).
+        step: usize,
+        /// The time.
+        t: f64,
+        /// Max-norm of the last residual `L_v(q, v) − p`.
+        residual: f64,
+    },
+    /// A computed quantity exceeded the range of `f64` (the solution grew without bound,
+    /// or its energy does not fit in a double), although the model's values were finite.
+    #[error("{quantity} overflowed at step {step}, t = {t}")]
+    Overflow {
+        /// The step.
+        step: usize,
+        /// The time.
+        t: f64,
+        /// What overflowed: `q`, `p`, `v`, `energy`, `energy_balance` or `state`.
+        quantity: &'static str,
     },
     /// The Newton solve of a step failed (after any subdivisions).
     #[error("newton failed at step {step}, t = {t}: {failure}")]
@@ -149,6 +203,12 @@ impl Error {
             Error::NonFiniteParameter { .. } => "non_finite_parameter".into(),
             Error::NonFiniteInitialData { .. } => "non_finite_initial_data".into(),
             Error::InvalidModel { .. } => "invalid_model".into(),
+            Error::InvalidNewtonOptions { .. } => "invalid_newton_options".into(),
+            Error::TooManySteps { .. } => "too_many_steps".into(),
+            Error::TooManyRecords { .. } => "too_many_records".into(),
+            Error::ModelTooLarge { .. } => "model_too_large".into(),
+            Error::VelocitySolveFailed { .. } => "velocity_solve_failed".into(),
+            Error::Overflow { .. } => "overflow".into(),
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
             Error::NonFiniteModel { .. } => "non_finite_model".into(),
             Error::NewtonFailed { failure, .. } => format!("newton_{}", failure.kind()),

@@ -104,14 +104,68 @@ pub struct RunFailure<const N: usize> {
     pub trajectory: Trajectory<N>,
 }
 
-/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// A streamed run that stopped early: the error and the totals up to it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{error} (after {} steps)", stats.steps)]
+pub struct StreamFailure {
+    /// What stopped the run.
+    #[source]
+    pub error: Error,
+    /// The totals up to the failure.
+    pub stats: RunStats,
+}
+
+impl From<StreamFailure> for Error {
+    fn from(f: StreamFailure) -> Error {
+        f.error
+    }
+}
+
+/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
+/// [`StepOptions::DEFAULT_MAX_STEPS`] steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub struct StepOptions {
     /// The Newton solver's options.
     pub newton: NewtonOptions,
     /// A failed step is retried as 2, 4, …, `2^max_subdivisions` substeps (default 0: off).
     pub max_subdivisions: u32,
+    /// The most steps a run may take; a longer run is refused before it starts
+    /// ([`Error::TooManySteps`]).
+    pub max_steps: usize,
+}
+
+impl StepOptions {
+    /// The default cap on steps per run: 10⁹.
+    pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        StepOptions {
+            newton: NewtonOptions::default(),
+            max_subdivisions: 0,
+            max_steps: Self::DEFAULT_MAX_STEPS,
+        }
+    }
+}
+
+/// The deepest stack the integrator provides for a model's node kernels (4 GiB, mapped
+/// lazily: only the pages the kernels touch use memory).
+pub const MAX_KERNEL_STACK: usize = 4 << 30;
+
+/// Runs `f` on a stack with room for the model's node kernels: the caller's own stack when
+/// it has `M::KERNEL_STACK_BYTES` to spare, else a fresh one on the heap (`stacker`).
+#[inline]
+fn with_kernel_stack<M: ForcedLagrangian<N>, const N: usize, R>(f: impl FnOnce() -> R) -> R {
+    // The stepper's own frames: a few records, snapshots and matrices of the model's size.
+    let own = 64 * std::mem::size_of::<StepRecord<N>>() + 256 * 1024;
+    let need = M::KERNEL_STACK_BYTES.saturating_add(own);
+    if need <= 256 * 1024 {
+        f()
+    } else {
+        stacker::maybe_grow(need, need.saturating_mul(2), f)
+    }
 }
 
 /// A fixed-step variational integrator for one model and one scheme.
@@ -133,12 +187,34 @@ pub struct StepOptions {
 /// assert!((end.q[0] - 1f64.cos()).abs() < 1e-9);
 /// # Ok::<(), forced_vi::Error>(())
 /// ```
-#[derive(Clone, Debug)]
 pub struct Integrator<'m, M, const N: usize> {
     model: &'m M,
     scheme: Scheme,
     h: f64,
     options: StepOptions,
+}
+
+// By hand: the model is borrowed, so neither needs `M: Clone` or `M: Debug`.
+impl<M, const N: usize> Clone for Integrator<'_, M, N> {
+    fn clone(&self) -> Self {
+        Integrator {
+            model: self.model,
+            scheme: self.scheme.clone(),
+            h: self.h,
+            options: self.options,
+        }
+    }
+}
+
+impl<M, const N: usize> std::fmt::Debug for Integrator<'_, M, N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Integrator")
+            .field("model", &std::any::type_name::<M>())
+            .field("scheme", &self.scheme.id())
+            .field("h", &self.h)
+            .field("options", &self.options)
+            .finish()
+    }
 }
 
 impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
@@ -147,10 +223,18 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 
     /// An integrator with step `h`. Defaults: [`StepOptions::default`].
     ///
-    /// Fails if `h` is not positive and finite or a model parameter is not finite.
+    /// Fails if `h` is not positive and finite (with `1/h` finite too), a model parameter
+    /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), or its
+    /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack.
     pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
-        if !(h.is_finite() && h > 0.0) {
+        if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
             return Err(Error::InvalidStepSize { h });
+        }
+        if M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
+            return Err(Error::ModelTooLarge {
+                stack_bytes: M::KERNEL_STACK_BYTES,
+                max: MAX_KERNEL_STACK,
+            });
         }
         model
             .check_parameters()
@@ -181,6 +265,13 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         self
     }
 
+    /// Caps the steps of a run ([`StepOptions::DEFAULT_MAX_STEPS`] by default).
+    #[must_use]
+    pub fn max_steps(mut self, steps: usize) -> Self {
+        self.options.max_steps = steps;
+        self
+    }
+
     /// The scheme.
     pub fn scheme(&self) -> &Scheme {
         &self.scheme
@@ -198,16 +289,27 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     }
 
     /// Streams every record to `f` and returns the totals. Memory use does not grow with
-    /// the number of steps.
+    /// the number of steps. On failure the totals up to it come back with the error.
     pub fn for_each_step(
         &self,
         init: InitialState<N>,
         t_final: f64,
         mut f: impl FnMut(&StepRecord<N>),
-    ) -> Result<RunStats, Error> {
-        let mut stepper = self.stepper(init, t_final)?;
+    ) -> Result<RunStats, StreamFailure> {
+        let mut stepper = self.stepper(init, t_final).map_err(|error| StreamFailure {
+            error,
+            stats: RunStats::default(),
+        })?;
         for rec in stepper.by_ref() {
-            f(&rec?);
+            match rec {
+                Ok(r) => f(&r),
+                Err(error) => {
+                    return Err(StreamFailure {
+                        error,
+                        stats: stepper.stats(),
+                    })
+                }
+            }
         }
         Ok(stepper.stats())
     }
@@ -225,7 +327,15 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
                 })
             }
         };
-        traj.records.reserve(stepper.total_steps() + 1);
+        // All records are reserved up front, so that a run that cannot hold them fails
+        // before its first step rather than aborting in the middle.
+        let records = stepper.total_steps().saturating_add(1);
+        if traj.records.try_reserve_exact(records).is_err() {
+            return Err(RunFailure {
+                error: Error::TooManyRecords { records },
+                trajectory: traj,
+            });
+        }
         for rec in stepper.by_ref() {
             match rec {
                 Ok(r) => traj.records.push(r),
@@ -439,6 +549,9 @@ pub struct Stepper<'a, M, const N: usize> {
     has_prev: bool,
     h_prev: f64,
     scale_f: f64,
+    /// Sign of the mass matrix's determinant at the start: a step that changes it has
+    /// crossed a singular mass.
+    mass_sign: f64,
     stats: RunStats,
     started: bool,
     done: bool,
@@ -450,9 +563,24 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Self, Error> {
+        with_kernel_stack::<M, N, _>(|| Self::start(integ, init, t_final))
+    }
+
+    fn start(
+        integ: &'a Integrator<'a, M, N>,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<Self, Error> {
         if !(t_final.is_finite() && t_final >= 0.0) {
             return Err(Error::InvalidFinalTime { t_final });
         }
+        integ
+            .options
+            .newton
+            .validate()
+            .map_err(|(field, value)| Error::InvalidNewtonOptions { field, value })?;
+        let h = integ.h;
+        let n_steps = step_count(t_final, h, integ.options.max_steps)?;
         let check = |what: &'static str, x: &[f64; N]| match x.iter().position(|c| !c.is_finite()) {
             Some(index) => Err(Error::NonFiniteInitialData { what, index }),
             None => Ok(()),
@@ -467,7 +595,6 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 if !(all_finite(&g.lv) && all_finite(&g.fq)) {
                     return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
                 }
-                mass_rcond(model, &q, &v, 0, 0.0)?;
                 (q, v, g.lv)
             }
             InitialState::Momentum { q, p } => {
@@ -478,18 +605,12 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 (q, v, p)
             }
         };
-        let h = integ.h;
-        let ratio = t_final / h;
-        let n_steps = if (ratio - ratio.round()).abs() <= 1e-10 * ratio.max(1.0) {
-            ratio.round() as usize
-        } else {
-            ratio.ceil() as usize
-        };
+        let mass_sign = mass_check(model, &q0, &v0, 0, 0.0)?;
         let scheme = &integ.scheme;
         let s = scheme.stages();
         let r = scheme.quadrature_nodes();
-        let energy0 =
-            energy(model, &q0, &v0, &p0).ok_or(Error::NonFiniteModel { step: 0, t: 0.0 })?;
+        let energy0 = energy(model, &q0, &v0, &p0)
+            .ok_or_else(|| non_finite(q0.amax().max(v0.amax()).max(p0.amax()), 0, 0.0, "energy"))?;
         let g0 = model.node_gradient(&q0, &v0);
         let zero_jac = NodeJacobian {
             grad: g0,
@@ -529,6 +650,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             has_prev: false,
             h_prev: h,
             scale_f: g0.fq.amax(),
+            mass_sign,
             stats: RunStats::default(),
             started: false,
             done: false,
@@ -622,7 +744,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     }
 
     /// One step of size `h` from the current state.
-    fn advance(&mut self, h: f64) -> Result<(usize, f64), NewtonFailure> {
+    fn advance(&mut self, h: f64) -> Result<(usize, f64), StepFailure> {
         self.predict(h);
         self.prob.h = h;
         self.prob.q0 = self.q.sum;
@@ -634,7 +756,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             .amax()
             .max(h * self.scale_f)
             .max(f64::MIN_POSITIVE);
-        let rep = self.newton.solve(&mut self.prob, &mut self.z, scale)?;
+        let rep = self
+            .newton
+            .solve(&mut self.prob, &mut self.z, scale)
+            .map_err(StepFailure::Newton)?;
         // The last residual evaluation was at the accepted iterate, so the node gradients in
         // `prob` belong to the solution. Σ_j G_j = h Σ_i b_i (L_q + F)_i gives the momentum
         // update as a small increment, which keeps round-off low (DESIGN §3).
@@ -654,18 +779,36 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             }
         }
         let dq: SVector<f64, N> = self.z.fixed_rows::<N>((s - 2) * N).into_owned();
-        self.q.add(&dq);
-        self.p.add(&dp);
-        let (w, c) = self.work;
-        let y = dw - c;
-        let t = w + y;
-        self.work = (t, (t - w) - y);
         // Velocity guess: the polynomial's slope at the end of the step.
         let mut vguess = SVector::<f64, N>::zeros();
         for m in 1..s {
             let zm = self.z.fixed_rows::<N>((m - 1) * N);
             vguess.axpy(sch.end_slope(m) / h, &zm, 1.0);
         }
+        if !M::STRUCTURE.constant_mass {
+            // A step may not end where the mass matrix is singular or has changed the sign
+            // of its determinant: the path crossed a singular mass, where the
+            // Euler–Lagrange equations stop being an ODE.
+            let q_end = self.q.sum + dq;
+            let e = self.prob.model.mass_matrix(&q_end, &vguess);
+            match mass_factor(&e) {
+                Some((rcond, sign)) if rcond >= MIN_MASS_RCOND && sign == self.mass_sign => {}
+                other => {
+                    // A change of sign means a singular mass was crossed: condition 0.
+                    let rcond = match other {
+                        Some((rc, sign)) if sign == self.mass_sign => rc,
+                        _ => 0.0,
+                    };
+                    return Err(StepFailure::SingularMass { rcond });
+                }
+            }
+        }
+        self.q.add(&dq);
+        self.p.add(&dp);
+        let (w, c) = self.work;
+        let y = dw - c;
+        let t = w + y;
+        self.work = (t, (t - w) - y);
         self.z_prev[0] = SVector::zeros();
         for m in 1..s {
             self.z_prev[m] = self.z.fixed_rows::<N>((m - 1) * N).into_owned();
@@ -726,8 +869,12 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                     self.stats.newton_iterations += iters;
                     self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
                     let rec = self.record(iters, res, parts);
-                    if !(rec.energy.is_finite() && all_finite(&rec.q) && all_finite(&rec.p)) {
-                        return Err(Error::NonFiniteModel { step: self.k, t });
+                    if let Some(quantity) = non_finite_field(&rec) {
+                        return Err(Error::Overflow {
+                            step: self.k,
+                            t,
+                            quantity,
+                        });
                     }
                     return Ok(rec);
                 }
@@ -740,7 +887,14 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             }
         }
         self.restore(&snap);
-        let failure = last_failure.unwrap_or(NewtonFailure::NonFinite);
+        let step = self.k + 1;
+        let failure = match last_failure {
+            Some(StepFailure::SingularMass { rcond }) => {
+                return Err(Error::SingularMassMatrix { step, t: t0, rcond })
+            }
+            Some(StepFailure::Newton(f)) => f,
+            None => NewtonFailure::NonFinite,
+        };
         let residual = match failure {
             NewtonFailure::MaxIterations { residual }
             | NewtonFailure::Diverged { residual }
@@ -748,13 +902,11 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             _ => f64::NAN,
         };
         if failure == NewtonFailure::NonFinite {
-            return Err(Error::NonFiniteModel {
-                step: self.k + 1,
-                t: t0,
-            });
+            let size = self.q.sum.amax().max(self.p.sum.amax()).max(self.v.amax());
+            return Err(non_finite(size, step, t0, "state"));
         }
         Err(Error::NewtonFailed {
-            step: self.k + 1,
+            step,
             t: t0,
             residual,
             failure,
@@ -777,7 +929,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
             self.done = true;
             return None;
         }
-        let out = self.step();
+        let out = with_kernel_stack::<M, N, _>(|| self.step());
         if out.is_err() {
             self.done = true;
         }
@@ -796,28 +948,134 @@ fn energy<M: ForcedLagrangian<N>, const N: usize>(
     e.is_finite().then_some(e)
 }
 
-/// The reciprocal condition estimate of the mass matrix from its LU pivots; errors if it is
-/// below `1e-13`.
-fn mass_rcond<M: ForcedLagrangian<N>, const N: usize>(
+/// Why one attempt at a step failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum StepFailure {
+    Newton(NewtonFailure),
+    /// The step ended at a singular mass matrix or across one.
+    SingularMass {
+        rcond: f64,
+    },
+}
+
+/// The number of steps of size `h` (the last one shortened) that reach `t_final`.
+///
+/// A ratio within 1e-10 of an integer is that integer, so that `t_final = n·h` does not
+/// end with a sliver of a step; any positive `t_final` takes at least one step.
+fn step_count(t_final: f64, h: f64, max: usize) -> Result<usize, Error> {
+    let ratio = t_final / h;
+    let steps = if (ratio - ratio.round()).abs() <= 1e-10 * ratio.max(1.0) {
+        ratio.round()
+    } else {
+        ratio.ceil()
+    };
+    let steps = if t_final > 0.0 { steps.max(1.0) } else { 0.0 };
+    if !(steps <= max as f64) {
+        return Err(Error::TooManySteps { steps, max });
+    }
+    // Exact: steps ≤ max ≤ usize::MAX, and the float is an integer.
+    Ok(steps as usize)
+}
+
+/// The error for a non-finite value computed from a state of max-norm `size`.
+///
+/// Past `√f64::MAX`, products of two state components overflow: the model is not at
+/// fault, the solution has left the range of `f64` ([`Error::Overflow`]). Below, the model
+/// returned a non-finite value at a representable point ([`Error::NonFiniteModel`]).
+fn non_finite(size: f64, step: usize, t: f64, quantity: &'static str) -> Error {
+    if size >= f64::MAX.sqrt() {
+        Error::Overflow { step, t, quantity }
+    } else {
+        Error::NonFiniteModel { step, t }
+    }
+}
+
+/// The first field of a record that is not finite, by name.
+fn non_finite_field<const N: usize>(r: &StepRecord<N>) -> Option<&'static str> {
+    [
+        ("q", all_finite(&r.q)),
+        ("p", all_finite(&r.p)),
+        ("v", all_finite(&r.v)),
+        ("energy", r.energy.is_finite()),
+        ("energy_balance", r.energy_balance.is_finite()),
+        ("residual", r.residual.is_finite()),
+    ]
+    .into_iter()
+    .find(|(_, ok)| !ok)
+    .map(|(name, _)| name)
+}
+
+/// Mass matrices whose equilibrated reciprocal condition is below this are singular.
+const MIN_MASS_RCOND: f64 = 1e-13;
+
+/// The reciprocal condition estimate and the sign of the determinant of a mass matrix,
+/// from the LU pivots of its equilibrated form `D⁻¹ E D⁻¹`, `D = diag(√max_j |E_ij|)`.
+///
+/// Equilibration makes the test scale-invariant: `diag(1e-14, 1)` is as well conditioned
+/// as the identity. `None` if a row is zero or a value is not finite.
+fn mass_factor<const N: usize>(e: &SMatrix<f64, N, N>) -> Option<(f64, f64)> {
+    let mut d = [0.0f64; N];
+    for (i, di) in d.iter_mut().enumerate() {
+        let m = e.row(i).amax();
+        if !(m.is_finite() && m > 0.0) {
+            return None;
+        }
+        *di = 1.0 / m.sqrt();
+    }
+    let mut a = SMatrix::<f64, N, N>::from_fn(|i, j| e[(i, j)] * d[i] * d[j]);
+    let (mut lo, mut hi, mut sign) = (f64::INFINITY, 0.0f64, 1.0f64);
+    for k in 0..N {
+        let p = (k..N).max_by(|&i, &j| a[(i, k)].abs().total_cmp(&a[(j, k)].abs()))?;
+        let piv = a[(p, k)];
+        if piv == 0.0 || !piv.is_finite() {
+            return None;
+        }
+        if p != k {
+            a.swap_rows(k, p);
+            sign = -sign;
+        }
+        sign *= piv.signum();
+        lo = lo.min(piv.abs());
+        hi = hi.max(piv.abs());
+        for i in k + 1..N {
+            let l = a[(i, k)] / piv;
+            for j in k + 1..N {
+                let u = a[(k, j)];
+                a[(i, j)] -= l * u;
+            }
+        }
+    }
+    Some((if N == 0 { 1.0 } else { lo / hi }, sign))
+}
+
+/// Checks the mass matrix at `(q, v)`; returns the sign of its determinant.
+fn mass_check<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     q: &SVector<f64, N>,
     v: &SVector<f64, N>,
     step: usize,
     t: f64,
-) -> Result<SMatrix<f64, N, N>, Error> {
+) -> Result<f64, Error> {
     let e = model.mass_matrix(q, v);
     if !all_finite(&e) {
         return Err(Error::NonFiniteModel { step, t });
     }
-    let rc = crate::newton::solve_small(&e, &SVector::<f64, N>::zeros()).map_or(0.0, |(_, rc)| rc);
-    if rc < 1e-13 {
-        return Err(Error::SingularMassMatrix { step, t, rcond: rc });
+    match mass_factor(&e) {
+        Some((rcond, sign)) if rcond >= MIN_MASS_RCOND => Ok(sign),
+        other => Err(Error::SingularMassMatrix {
+            step,
+            t,
+            rcond: other.map_or(0.0, |(rc, _)| rc),
+        }),
     }
-    Ok(e)
 }
 
-/// Solves `L_v(q, v) = p` for `v` by Newton's method from `guess`; one step is exact for a
-/// kinetic energy quadratic in `v`.
+/// Solves `L_v(q, v) = p` for `v` by a damped Newton method from `guess`.
+///
+/// One step is exact for a kinetic energy quadratic in `v` with a constant mass matrix.
+/// Otherwise it iterates, halving steps that do not reduce the residual (or leave the
+/// model's domain), until `|L_v(q, v) − p| ≤ 1e-13 (|p| + |E| |v|)` or the round-off floor
+/// of those terms, and fails with [`Error::VelocitySolveFailed`] after 60 iterations.
 fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     q: &SVector<f64, N>,
@@ -826,24 +1084,63 @@ fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     step: usize,
     t: f64,
 ) -> Result<SVector<f64, N>, Error> {
+    let singular = |rcond| Error::SingularMassMatrix { step, t, rcond };
+    let residual_at = |v: &SVector<f64, N>| -> Option<SVector<f64, N>> {
+        let r = model.node_gradient(q, v).lv - p;
+        all_finite(&r).then_some(r)
+    };
     let mut v = guess;
-    let max_iter = if M::STRUCTURE.constant_mass { 1 } else { 8 };
-    for it in 0..max_iter {
-        let lv = model.node_gradient(q, &v).lv;
-        let e = mass_rcond(model, q, &v, step, t)?;
-        let rhs = p - lv;
-        let (dv, _) = crate::newton::solve_small(&e, &rhs).ok_or(Error::SingularMassMatrix {
-            step,
-            t,
-            rcond: 0.0,
-        })?;
+    if M::STRUCTURE.constant_mass {
+        let e = model.mass_matrix(q, &v);
+        let r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
+        let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
         v += dv;
-        if !all_finite(&v) {
+        return if all_finite(&v) {
+            Ok(v)
+        } else {
+            Err(Error::NonFiniteModel { step, t })
+        };
+    }
+    let mut r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
+    for _ in 0..60 {
+        let e = model.mass_matrix(q, &v);
+        if !all_finite(&e) {
             return Err(Error::NonFiniteModel { step, t });
         }
-        if it > 0 && dv.amax() <= 4.0 * f64::EPSILON * v.amax() {
-            break;
+        let tol = 1e-13 * (p.amax() + e.amax() * v.amax()) + 4.0 * f64::MIN_POSITIVE;
+        if r.amax() <= tol {
+            return Ok(v);
+        }
+        let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
+        let mut lambda = 1.0;
+        loop {
+            let trial = v + dv * lambda;
+            if let Some(rt) = residual_at(&trial).filter(|_| all_finite(&trial)) {
+                if rt.amax() < r.amax() * (1.0 - 1e-4 * lambda) {
+                    v = trial;
+                    r = rt;
+                    break;
+                }
+            }
+            lambda *= 0.5;
+            if lambda < 1e-10 {
+                // No step reduces the residual: at the round-off floor, or stuck.
+                let floor = 64.0 * f64::EPSILON * (p.amax() + e.amax() * v.amax());
+                return if r.amax() <= floor {
+                    Ok(v)
+                } else {
+                    Err(Error::VelocitySolveFailed {
+                        step,
+                        t,
+                        residual: r.amax(),
+                    })
+                };
+            }
         }
     }
-    Ok(v)
+    Err(Error::VelocitySolveFailed {
+        step,
+        t,
+        residual: r.amax(),
+    })
 }

@@ -130,6 +130,7 @@ pub struct NewtonReport {
 pub struct DenseLu {
     lu: DMatrix<f64>,
     piv: Vec<usize>,
+    row_scale: Vec<f64>,
 }
 
 impl DenseLu {
@@ -138,19 +139,22 @@ impl DenseLu {
         DenseLu {
             lu: DMatrix::zeros(n, n),
             piv: vec![0; n],
+            row_scale: vec![0.0; n],
         }
     }
 
-    /// Factors `a`. Fails if a pivot is zero or negligible against the matrix's scale.
+    /// Factors `a`. Fails if a pivot is zero or negligible against the scale of its own
+    /// row (a scale-invariant test: rows of very different sizes are not singular).
     pub fn factor(&mut self, a: &DMatrix<f64>) -> Result<(), NewtonFailure> {
         let n = a.nrows();
         self.lu.as_mut_slice().copy_from_slice(a.as_slice());
         let m = self.lu.as_mut_slice(); // column-major: m[i + j * n] is row i, column j
-        let scale = m.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-        if !scale.is_finite() || m.iter().any(|x| x.is_nan()) {
+        if m.iter().any(|x| !x.is_finite()) {
             return Err(NewtonFailure::NonFinite);
         }
-        let tiny = scale * f64::EPSILON * 1e-3;
+        for (i, r) in self.row_scale.iter_mut().enumerate() {
+            *r = (0..n).fold(0.0f64, |s, j| s.max(m[i + j * n].abs()));
+        }
         for k in 0..n {
             let col = &m[k * n..(k + 1) * n];
             let (mut p, mut best) = (k, col[k].abs());
@@ -160,7 +164,7 @@ impl DenseLu {
                     p = i;
                 }
             }
-            if best <= tiny || best == 0.0 {
+            if best <= self.row_scale[p] * f64::EPSILON * 1e-3 || best == 0.0 {
                 return Err(NewtonFailure::SingularJacobian);
             }
             self.piv[k] = p;
@@ -168,6 +172,7 @@ impl DenseLu {
                 for j in 0..n {
                     m.swap(k + j * n, p + j * n);
                 }
+                self.row_scale.swap(k, p);
             }
             let inv = 1.0 / m[k + k * n];
             for x in &mut m[k * n + k + 1..(k + 1) * n] {

@@ -1,0 +1,438 @@
+//! Trust: every bad or extreme input ends in a correct `Ok` or a typed error that keeps the
+//! steps before it; never a panic, an abort, a hang or a wrong number. The runtime classes
+//! of the trust issue: `cargo test --release --test trust_runtime`.
+
+use forced_vi::prelude::*;
+use forced_vi::{Error, NewtonOptions, SchemeError};
+
+/// `L = ½v² − ½q²`, `F = −c v`.
+struct Damped {
+    c: f64,
+}
+
+impl ForcedLagrangian<1> for Damped {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (v[0] * v[0] - q[0] * q[0]) * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * self.c]
+    }
+}
+
+/// The exact solution of the damped oscillator from `(1, 0)`.
+fn damped_exact(c: f64, t: f64) -> f64 {
+    let w = (1.0 - c * c / 4.0).sqrt();
+    (-c * t / 2.0).exp() * ((w * t).cos() + c / (2.0 * w) * (w * t).sin())
+}
+
+// ---- Class 1: Newton accepts only converged iterates (also `newton::tests`). ----
+
+#[test]
+fn trust_many_stages_are_refused_or_accurate() {
+    let model = Damped { c: 0.1 };
+    // The reproducer: lobatto(44) used to return q = −1.3e137.
+    assert!(matches!(
+        Scheme::lobatto(44),
+        Err(SchemeError::TooManyStages { .. })
+    ));
+    // Up to the cap, high stage counts are accurate (the predictor no longer extrapolates
+    // with coefficients of 1e30).
+    for s in [6, 10, 16, 24, forced_vi::scheme::MAX_STAGES] {
+        let run = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.1)
+            .unwrap()
+            .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+            .unwrap_or_else(|f| panic!("lobatto{s}: {}", f.error));
+        let end = run.last().unwrap();
+        let err = (end.q[0] - damped_exact(0.1, 10.0)).abs();
+        assert!(err < 1e-12, "lobatto{s}: error {err:e}");
+    }
+}
+
+// ---- Class 2: sizes that abort, hang or wrap. ----
+
+#[test]
+fn trust_absurd_step_counts_are_refused_before_stepping() {
+    let model = Damped { c: 0.1 };
+    let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 1.0).unwrap();
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    for t_final in [1e300, 1e12, f64::MAX] {
+        let f = integ.run(init, t_final).unwrap_err();
+        assert!(matches!(f.error, Error::TooManySteps { .. }), "{}", f.error);
+        assert!(f.trajectory.records.is_empty());
+        let f = integ.for_each_step(init, t_final, |_| {}).unwrap_err();
+        assert!(matches!(f.error, Error::TooManySteps { .. }));
+    }
+    // The cap is the user's to set.
+    let f = integ.clone().max_steps(10).run(init, 11.0).unwrap_err();
+    assert!(matches!(f.error, Error::TooManySteps { max: 10, .. }));
+    assert!(integ.max_steps(10).run(init, 10.0).is_ok());
+}
+
+#[test]
+fn trust_records_that_cannot_fit_are_refused_before_stepping() {
+    // 1e9 records of 80 bytes. Only meaningful where the kernel refuses allocations larger
+    // than memory (overcommit heuristics, the Linux default); elsewhere it would run.
+    let mode = std::fs::read_to_string("/proc/sys/vm/overcommit_memory").unwrap_or_default();
+    if mode.trim() == "1" {
+        eprintln!("overcommit_memory = 1: skipped");
+        return;
+    }
+    let model = Damped { c: 0.1 };
+    let f = Integrator::new(&model, Scheme::midpoint(), 1e-9)
+        .unwrap()
+        .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+        .unwrap_err();
+    assert!(
+        matches!(
+            f.error,
+            Error::TooManyRecords {
+                records: 1_000_000_001
+            }
+        ),
+        "{}",
+        f.error
+    );
+}
+
+#[test]
+fn trust_a_tiny_final_time_takes_one_short_step() {
+    let model = Damped { c: 0.1 };
+    for (h, t_final) in [(1.0, 1e-12), (0.1, 1e-300), (1.0, 5e-11)] {
+        let run = Integrator::new(&model, Scheme::lobatto(3).unwrap(), h)
+            .unwrap()
+            .run(InitialState::from_velocity([1.0], [2.0]), t_final)
+            .unwrap();
+        assert_eq!(run.records.len(), 2, "t_final = {t_final}");
+        let end = run.last().unwrap();
+        assert_eq!(end.t, t_final);
+        // q(T) = 1 + 2T to first order: the state moved by the step it took.
+        assert!(
+            (end.q[0] - (1.0 + 2.0 * t_final)).abs() <= 1e-15,
+            "{}",
+            end.q[0]
+        );
+    }
+}
+
+#[test]
+fn trust_subnormal_and_absurd_step_sizes_are_invalid() {
+    let model = Damped { c: 0.1 };
+    for h in [5e-324, 1e-310, f64::MIN_POSITIVE / 4.0] {
+        let err = Integrator::new(&model, Scheme::midpoint(), h).unwrap_err();
+        assert!(matches!(err, Error::InvalidStepSize { .. }), "{h}: {err}");
+    }
+}
+
+// ---- Class 3: no stack overflow for moderately large models. ----
+
+/// A damped chain of `N` unit masses with nonlinear springs, written by hand with the
+/// default (general dual-number) kernels.
+struct Chain<const N: usize>;
+
+impl<const N: usize> ForcedLagrangian<N> for Chain<N> {
+    fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D {
+        let mut l = D::from(0.0);
+        for i in 0..N {
+            l += v[i] * v[i] * 0.5;
+        }
+        for i in 0..=N {
+            let left = if i == 0 { D::from(0.0) } else { q[i - 1] };
+            let right = if i == N { D::from(0.0) } else { q[i] };
+            let d = right - left;
+            l -= d * d * 0.5 + d.powi(4) * 0.25;
+        }
+        l
+    }
+    fn force<D: Scalar>(&self, _q: &[D; N], v: &[D; N]) -> [D; N] {
+        std::array::from_fn(|i| -v[i] * 0.1)
+    }
+}
+
+fn chain_steps<const N: usize>(steps: usize) -> Result<(), String> {
+    let mut q0 = [0.0; N];
+    q0[0] = 0.1;
+    let run = Integrator::new(&Chain::<N>, Scheme::lobatto(2).unwrap(), 0.05)
+        .map_err(|e| e.to_string())?
+        .run(
+            InitialState::from_velocity(q0, [0.0; N]),
+            steps as f64 * 0.05,
+        )
+        .map_err(|f| f.error.to_string())?;
+    let end = run.last().ok_or("no records")?;
+    if end.q.iter().all(|x| x.is_finite()) && end.energy_balance.abs() < 1e-3 {
+        Ok(())
+    } else {
+        Err(format!("bad end state {end:?}"))
+    }
+}
+
+/// Runs `f` on a thread with a 2 MiB stack, as rayon's workers have.
+fn on_small_stack(f: impl FnOnce() -> Result<(), String> + Send + 'static) {
+    std::thread::Builder::new()
+        .stack_size(2 << 20)
+        .spawn(f)
+        .unwrap()
+        .join()
+        .unwrap()
+        .unwrap();
+}
+
+#[test]
+fn trust_large_hand_written_models_run_on_a_small_stack() {
+    on_small_stack(|| chain_steps::<32>(3));
+    on_small_stack(|| chain_steps::<64>(1));
+    chain_steps::<64>(1).unwrap();
+}
+
+#[test]
+fn trust_large_macro_models_run_on_a_small_stack() {
+    use forced_vi_scenes::models::SpringChain;
+    fn run<const N: usize>() -> Result<(), String> {
+        let model = SpringChain::<N> {
+            m: 1.0,
+            k: 1.0,
+            beta: 1.0,
+            c: 0.1,
+        };
+        let mut q0 = [0.0; N];
+        q0[0] = 0.1;
+        Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.05)
+            .map_err(|e| e.to_string())?
+            .run(InitialState::from_velocity(q0, [0.0; N]), 0.1)
+            .map(|_| ())
+            .map_err(|f| f.error.to_string())
+    }
+    on_small_stack(run::<32>);
+    on_small_stack(run::<64>);
+}
+
+// ---- Class 4: the velocity solve converges or fails with a typed error. ----
+
+/// `L = ½(v² + v⁴ + v⁶) − ½q²`.
+struct Stiffening;
+
+impl ForcedLagrangian<1> for Stiffening {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        let v2 = v[0] * v[0];
+        (v2 + v2 * v2 + v2 * v2 * v2 - q[0] * q[0]) * 0.5
+    }
+}
+
+/// `L = −√(1 − v²) − ½q²`, a relativistic oscillator: `p = v / √(1 − v²)`.
+struct Relativistic;
+
+impl ForcedLagrangian<1> for Relativistic {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        -(-v[0] * v[0] + 1.0).sqrt() - q[0] * q[0] * 0.5
+    }
+}
+
+#[test]
+fn trust_velocity_solve_converges_for_nonquadratic_kinetic_energy() {
+    let run = Integrator::new(&Stiffening, Scheme::lobatto(3).unwrap(), 0.001)
+        .unwrap()
+        .run(InitialState::from_momentum([0.5], [6.0]), 0.2)
+        .unwrap_or_else(|f| panic!("{}", f.error));
+    let first = &run.records[0];
+    assert!((first.v[0] - 1.0).abs() < 1e-13, "v0 = {}", first.v[0]);
+    assert!(
+        (first.energy - 4.625).abs() < 1e-12,
+        "E0 = {}",
+        first.energy
+    );
+    for r in &run.records {
+        assert!(r.energy_balance.abs() < 1e-8, "{r:?}");
+    }
+}
+
+#[test]
+fn trust_velocity_solve_stays_in_the_model_domain() {
+    for p0 in [0.5, 1.0, 2.0, 10.0] {
+        let run = Integrator::new(&Relativistic, Scheme::lobatto(3).unwrap(), 0.001)
+            .unwrap()
+            .run(InitialState::from_momentum([0.5], [p0]), 0.1)
+            .unwrap_or_else(|f| panic!("p0 = {p0}: {}", f.error));
+        let v0 = p0 / (1.0 + p0 * p0).sqrt();
+        assert!((run.records[0].v[0] - v0).abs() < 1e-13, "p0 = {p0}");
+        for r in &run.records {
+            assert!(r.v[0].abs() < 1.0 && r.energy_balance.abs() < 1e-8, "{r:?}");
+        }
+    }
+}
+
+// ---- Class 8: results that are not results. ----
+
+/// A free particle with strong linear drag.
+struct Dragged;
+
+impl ForcedLagrangian<1> for Dragged {
+    fn lagrangian<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> D {
+        v[0] * v[0] * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * 100.0]
+    }
+}
+
+fn all_fields_finite(r: &StepRecord<1>) -> bool {
+    [
+        r.q[0],
+        r.p[0],
+        r.v[0],
+        r.energy,
+        r.energy_balance,
+        r.residual,
+    ]
+    .iter()
+    .all(|x| x.is_finite())
+}
+
+#[test]
+fn trust_ok_records_are_finite_or_the_run_reports_overflow() {
+    for v0 in [1e150, 1e154, 1e200, 1e300] {
+        match Integrator::new(&Dragged, Scheme::lobatto(3).unwrap(), 0.1)
+            .unwrap()
+            .run(InitialState::from_velocity([0.0], [v0]), 0.5)
+        {
+            Ok(run) => assert!(run.records.iter().all(all_fields_finite), "v0 = {v0}"),
+            Err(f) => {
+                assert!(
+                    matches!(f.error, Error::Overflow { .. }),
+                    "v0 = {v0}: {}",
+                    f.error
+                );
+                assert!(f.trajectory.records.iter().all(all_fields_finite));
+            }
+        }
+    }
+}
+
+/// `L = ½(1 − q²)v² − ½q²`: the mass vanishes at `|q| = 1`.
+struct SingularAtOne;
+
+impl ForcedLagrangian<1> for SingularAtOne {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (-q[0] * q[0] + 1.0) * v[0] * v[0] * 0.5 - q[0] * q[0] * 0.5
+    }
+}
+
+#[test]
+fn trust_subdivision_never_crosses_a_singular_mass() {
+    for (levels, h) in [(0, 0.1), (4, 0.1), (12, 0.05)] {
+        let f = Integrator::new(&SingularAtOne, Scheme::lobatto(3).unwrap(), h)
+            .unwrap()
+            .max_subdivisions(levels)
+            .run(InitialState::from_velocity([0.0], [2.0]), 3.0)
+            .expect_err("the exact solution reaches the singular mass at |q| = 1");
+        assert!(
+            matches!(
+                f.error,
+                Error::SingularMassMatrix { .. } | Error::NewtonFailed { .. }
+            ),
+            "levels {levels}: {}",
+            f.error
+        );
+        eprintln!("levels {levels}: {}", f.error);
+        for r in &f.trajectory.records {
+            eprintln!("  t {:.4} q {:.6} E {:.6}", r.t, r.q[0], r.energy);
+            // Close to the singular mass the step is too large for the dynamics and the
+            // energy drifts, but it never jumps as it would across the singularity.
+            assert!(r.q[0].abs() < 1.0, "levels {levels}: crossed at {r:?}");
+            assert!((r.energy - 2.0).abs() < 0.5, "levels {levels}: {r:?}");
+        }
+    }
+}
+
+// ---- Class 9: the right error kinds, no false positives. ----
+
+#[test]
+fn trust_an_unstable_scheme_reports_overflow_not_a_model_fault() {
+    // α = 0 on a stiff oscillator grows without bound.
+    let model = Damped { c: 0.0 };
+    let f = Integrator::new(&model, Scheme::new(SchemeId::Alpha(0.0)).unwrap(), 3.0)
+        .unwrap()
+        .run(InitialState::from_velocity([1.0], [0.0]), 3e5)
+        .unwrap_err();
+    assert!(
+        matches!(f.error, Error::Overflow { .. } | Error::NewtonFailed { .. }),
+        "{}",
+        f.error
+    );
+}
+
+/// `L = ½ (a v₁² + v₂²) − ½ |q|²`.
+struct Anisotropic {
+    a: f64,
+}
+
+impl ForcedLagrangian<2> for Anisotropic {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] * self.a + v[1] * v[1] - q[0] * q[0] - q[1] * q[1]) * 0.5
+    }
+}
+
+#[test]
+fn trust_badly_scaled_diagonal_mass_is_not_singular() {
+    for a in [1e-14, 1e-30, 1e30] {
+        let run = Integrator::new(&Anisotropic { a }, Scheme::lobatto(3).unwrap(), 0.01)
+            .unwrap()
+            .run(InitialState::from_momentum([0.0, 1.0], [0.0, 0.0]), 0.1)
+            .unwrap_or_else(|f| panic!("a = {a}: {}", f.error));
+        assert!((run.last().unwrap().q[1] - 0.1f64.cos()).abs() < 1e-10);
+    }
+}
+
+#[test]
+fn trust_bad_newton_options_are_typed_errors() {
+    let model = Damped { c: 0.1 };
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    for opts in [
+        NewtonOptions::default().tolerances(-1e-12, 1e-15),
+        NewtonOptions::default().tolerances(f64::NAN, 1e-15),
+        NewtonOptions::default().tolerances(1e-12, f64::INFINITY),
+        NewtonOptions::default().residual_tol(-1.0),
+        NewtonOptions::default().max_iterations(0),
+    ] {
+        let f = Integrator::new(&model, Scheme::midpoint(), 0.1)
+            .unwrap()
+            .newton(opts)
+            .run(init, 1.0)
+            .unwrap_err();
+        assert!(
+            matches!(f.error, Error::InvalidNewtonOptions { .. }),
+            "{}",
+            f.error
+        );
+    }
+}
+
+/// A force that is NaN for `q > 1`.
+struct SqrtDrag;
+
+impl ForcedLagrangian<1> for SqrtDrag {
+    fn lagrangian<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> D {
+        v[0] * v[0] * 0.5
+    }
+    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * (-q[0] + 1.0).sqrt() * 0.1]
+    }
+}
+
+#[test]
+fn trust_streaming_failure_keeps_its_stats() {
+    let mut seen = 0;
+    let f = Integrator::new(&SqrtDrag, Scheme::lobatto(2).unwrap(), 0.01)
+        .unwrap()
+        .for_each_step(InitialState::from_velocity([0.0], [2.0]), 2.0, |_| {
+            seen += 1
+        })
+        .unwrap_err();
+    assert!(
+        matches!(f.error, Error::NonFiniteModel { .. }),
+        "{}",
+        f.error
+    );
+    assert!(f.stats.steps > 10);
+    assert_eq!(f.stats.steps + 1, seen, "every completed step was streamed");
+    assert!(f.stats.newton_iterations >= f.stats.steps);
+}
