@@ -491,17 +491,31 @@ mod tests {
             Scheme::new(id).unwrap();
         }
         assert!("lobatto1".parse::<SchemeId>().is_err());
-        for bad in ["lobatto+3", "lobatto007", "lobatto 3", "lobatto", "lobatto-2", "lobatto3.0"] {
+        for bad in [
+            "lobatto+3",
+            "lobatto007",
+            "lobatto 3",
+            "lobatto",
+            "lobatto-2",
+            "lobatto3.0",
+        ] {
             assert_eq!(
                 bad.parse::<SchemeId>(),
                 Err(SchemeError::Unknown(bad.to_string())),
                 "{bad}"
             );
         }
-        for big in ["lobatto33", "lobatto18446744073709551615", "lobatto99999999999999999999999"] {
+        for big in [
+            "lobatto33",
+            "lobatto18446744073709551615",
+            "lobatto99999999999999999999999",
+        ] {
             assert!(matches!(
                 big.parse::<SchemeId>(),
-                Err(SchemeError::TooManyStages { max: MAX_STAGES, .. })
+                Err(SchemeError::TooManyStages {
+                    max: MAX_STAGES,
+                    ..
+                })
             ));
         }
         assert!(Scheme::lobatto(usize::MAX).is_err());
@@ -543,7 +557,10 @@ mod accuracy {
     fn nodes_and_weights_are_accurate_up_to_the_cap() {
         for (s, ex, ew) in errors() {
             if s <= MAX_STAGES {
-                assert!(ex <= 2.3e-16 && ew <= 1e-14, "s = {s}: nodes {ex:e}, weights {ew:e}");
+                assert!(
+                    ex <= 2.3e-16 && ew <= 1e-14,
+                    "s = {s}: nodes {ex:e}, weights {ew:e}"
+                );
             }
         }
     }
