@@ -32,12 +32,16 @@
 //! ([`crate::baselines`]) over a ladder of tolerances. See [`plan`] for the grids, [`orders`]
 //! for how observed orders are fitted and [`work_precision`] for what is measured and timed.
 
+pub mod chart;
 pub mod orders;
 pub mod plan;
-pub mod plots;
 pub mod readme;
 pub mod stability;
 pub mod step_cost;
+pub mod study;
+pub mod style;
+pub mod table;
+pub mod timing;
 pub mod work_precision;
 
 use std::fmt;

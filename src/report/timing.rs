@@ -1,0 +1,135 @@
+//! The timing loop: wall times of repeated runs and their median.
+//!
+//! Every command times the same way: run once, decide from that first time how many repeats
+//! fit the budget, and report the median. Where two variants are compared (`step-cost`), the
+//! repeats alternate which goes first, so that drifts in machine load hit both alike.
+
+use std::time::Instant;
+
+/// The median of `xs` (NaN for none).
+pub fn median(xs: &mut [f64]) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    let n = xs.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        xs[n / 2]
+    } else {
+        0.5 * (xs[n / 2 - 1] + xs[n / 2])
+    }
+}
+
+/// Runs `f` and returns its result with the wall time in seconds.
+pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let start = Instant::now();
+    let out = f();
+    (out, start.elapsed().as_secs_f64())
+}
+
+/// A run timed over repeats.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Timing<T> {
+    /// The result of the first run.
+    pub first: T,
+    /// The wall time of the first run, seconds.
+    pub first_seconds: f64,
+    /// The median wall time over all runs, seconds.
+    pub median: f64,
+}
+
+/// Runs `f` once, then `repeats(first time) − 1` more times, stopping at the first error.
+pub fn repeated<T, E>(
+    repeats: impl FnOnce(f64) -> usize,
+    mut f: impl FnMut() -> Result<T, E>,
+) -> Result<Timing<T>, E> {
+    let (first, first_seconds) = timed(&mut f);
+    let first = first?;
+    let mut times = vec![first_seconds];
+    for _ in 1..repeats(first_seconds) {
+        let (r, t) = timed(&mut f);
+        r?;
+        times.push(t);
+    }
+    Ok(Timing {
+        first,
+        first_seconds,
+        median: median(&mut times),
+    })
+}
+
+/// Medians of two measurements `a` and `b` over `repeats` rounds, alternating which runs
+/// first. Each call returns one sample (for instance nanoseconds per step).
+pub fn interleaved<E>(
+    repeats: usize,
+    mut a: impl FnMut() -> Result<f64, E>,
+    mut b: impl FnMut() -> Result<f64, E>,
+) -> Result<(f64, f64), E> {
+    let (mut ta, mut tb) = (Vec::new(), Vec::new());
+    for k in 0..repeats {
+        if k % 2 == 0 {
+            ta.push(a()?);
+            tb.push(b()?);
+        } else {
+            tb.push(b()?);
+            ta.push(a()?);
+        }
+    }
+    Ok((median(&mut ta), median(&mut tb)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_and_even() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
+
+    #[test]
+    fn repeats_follow_the_first_time_and_stop_on_errors() {
+        let mut calls = 0;
+        let t = repeated(
+            |_| 4,
+            || -> Result<usize, ()> {
+                calls += 1;
+                Ok(calls)
+            },
+        )
+        .unwrap();
+        assert_eq!((t.first, calls), (1, 4));
+        let mut calls = 0;
+        let e = repeated(
+            |_| 4,
+            || {
+                calls += 1;
+                if calls == 2 {
+                    Err("second")
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert_eq!(e, Err("second"));
+        let mut order = Vec::new();
+        let (a, b) = {
+            let order = std::cell::RefCell::new(&mut order);
+            interleaved(
+                3,
+                || -> Result<f64, ()> {
+                    order.borrow_mut().push('a');
+                    Ok(1.0)
+                },
+                || {
+                    order.borrow_mut().push('b');
+                    Ok(2.0)
+                },
+            )
+            .unwrap()
+        };
+        assert_eq!((a, b), (1.0, 2.0));
+        assert_eq!(order, ['a', 'b', 'b', 'a', 'a', 'b']);
+    }
+}

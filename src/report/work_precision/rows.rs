@@ -1,0 +1,307 @@
+//! What the work-precision study measures: its rows, and the records of its CSV files.
+
+use serde::{Deserialize, Serialize};
+
+use crate::report::orders::Fit;
+use crate::report::table::{sci, text};
+use crate::report::Method;
+use crate::scenes::BalanceSeries;
+
+/// Minimum, mean and maximum over ensemble members.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spread {
+    /// Smallest member error.
+    pub min: f64,
+    /// Mean member error.
+    pub mean: f64,
+    /// Largest member error.
+    pub max: f64,
+}
+
+/// One measured point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// The scene.
+    pub scene: &'static str,
+    /// The method.
+    pub method: Method,
+    /// `h` for variational schemes, the tolerance for baselines.
+    pub h_or_tol: f64,
+    /// Steps (summed over members).
+    pub steps: usize,
+    /// Newton iterations (summed over members).
+    pub newton_iters: usize,
+    /// Median wall time in seconds.
+    pub seconds: f64,
+    /// Errors in q, p and energy (means over members); spreads for ensembles.
+    pub err: [Spread; 3],
+}
+
+impl Row {
+    /// `err_q`, `err_p`, `err_energy` (member means).
+    pub fn errors(&self) -> [f64; 3] {
+        self.err.map(|s| s.mean)
+    }
+}
+
+/// A run that produced no result.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Failure {
+    /// The scene.
+    pub scene: &'static str,
+    /// The method.
+    pub method: Method,
+    /// Its step size or tolerance.
+    pub h_or_tol: f64,
+    /// What went wrong.
+    pub message: String,
+}
+
+/// The fitted orders of one variational method on one scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OrderRow {
+    /// The scene.
+    pub scene: &'static str,
+    /// The method.
+    pub method: Method,
+    /// Control points `s`.
+    pub stages: usize,
+    /// The scheme's order.
+    pub expected: usize,
+    /// Observed orders in q, p and energy.
+    pub observed: [Option<Fit>; 3],
+}
+
+/// One curve of the energy-balance plot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BalanceCurve {
+    /// The method.
+    pub method: Method,
+    /// Its step size or tolerance.
+    pub h_or_tol: f64,
+    /// Wall time of the run.
+    pub seconds: f64,
+    /// The sampled energy-balance error.
+    pub series: BalanceSeries,
+}
+
+/// The energy-balance long run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LongRun {
+    /// The scene.
+    pub scene: &'static str,
+    /// Final time.
+    pub t_final: f64,
+    /// The cost budget in seconds.
+    pub budget: f64,
+    /// One curve per method.
+    pub curves: Vec<BalanceCurve>,
+}
+
+/// Everything the report measured.
+#[derive(Clone, Debug, Default)]
+pub struct Summary {
+    /// Names of the scenes run, in order.
+    pub scenes: Vec<&'static str>,
+    /// The methods run, in order.
+    pub methods: Vec<Method>,
+    /// Measured points.
+    pub rows: Vec<Row>,
+    /// Failed runs.
+    pub failures: Vec<Failure>,
+    /// Fitted orders.
+    pub orders: Vec<OrderRow>,
+    /// The long run, if its scene was selected.
+    pub long_run: Option<LongRun>,
+    /// Wall time of the whole report in seconds.
+    pub elapsed: f64,
+}
+
+impl Summary {
+    /// The rows of `method` on `scene`, by increasing `h` or tolerance.
+    pub fn rows_of(&self, scene: &str, method: &Method) -> Vec<&Row> {
+        let mut rows: Vec<&Row> = self
+            .rows
+            .iter()
+            .filter(|r| r.scene == scene && &r.method == method)
+            .collect();
+        rows.sort_by(|a, b| a.h_or_tol.total_cmp(&b.h_or_tol));
+        rows
+    }
+
+    /// The cheapest measured run of `method` on `scene` with `err_q ≤ target`.
+    pub fn cheapest_time(&self, scene: &str, method: &Method, target: f64) -> Option<f64> {
+        self.rows
+            .iter()
+            .filter(|r| r.scene == scene && &r.method == method && r.errors()[0] <= target)
+            .map(|r| r.seconds)
+            .min_by(f64::total_cmp)
+    }
+}
+
+/// A line of `work_precision.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorkPrecisionRecord {
+    /// The scene.
+    pub scene: String,
+    /// The method.
+    #[serde(with = "text")]
+    pub method: Method,
+    /// `h` or the tolerance.
+    #[serde(with = "sci")]
+    pub h_or_tol: f64,
+    /// Steps.
+    pub steps: usize,
+    /// Newton iterations.
+    pub newton_iters: usize,
+    /// Median wall time, seconds.
+    #[serde(with = "sci")]
+    pub seconds: f64,
+    /// Error in q.
+    #[serde(with = "sci")]
+    pub err_q: f64,
+    /// Error in p.
+    #[serde(with = "sci")]
+    pub err_p: f64,
+    /// Error in the energy.
+    #[serde(with = "sci")]
+    pub err_energy: f64,
+}
+
+impl From<&Row> for WorkPrecisionRecord {
+    fn from(r: &Row) -> Self {
+        let [err_q, err_p, err_energy] = r.errors();
+        WorkPrecisionRecord {
+            scene: r.scene.to_string(),
+            method: r.method,
+            h_or_tol: r.h_or_tol,
+            steps: r.steps,
+            newton_iters: r.newton_iters,
+            seconds: r.seconds,
+            err_q,
+            err_p,
+            err_energy,
+        }
+    }
+}
+
+/// A line of `orders.csv`: the order in q, three decimals, empty where none was fitted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OrderRecord {
+    /// The scene.
+    pub scene: String,
+    /// The method.
+    #[serde(with = "text")]
+    pub method: Method,
+    /// Control points `s`.
+    pub stages: usize,
+    /// The scheme's order.
+    pub expected_order: usize,
+    /// The observed order in q, `{:.3}`.
+    pub observed_order: String,
+}
+
+impl From<&OrderRow> for OrderRecord {
+    fn from(o: &OrderRow) -> Self {
+        OrderRecord {
+            scene: o.scene.to_string(),
+            method: o.method,
+            stages: o.stages,
+            expected_order: o.expected,
+            observed_order: o.observed[0]
+                .as_ref()
+                .map_or(String::new(), |f| format!("{:.3}", f.order)),
+        }
+    }
+}
+
+/// A line of `ensemble.csv`: min, mean and max over the members.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub struct EnsembleRecord {
+    pub scene: String,
+    #[serde(with = "text")]
+    pub method: Method,
+    #[serde(with = "sci")]
+    pub h_or_tol: f64,
+    #[serde(with = "sci")]
+    pub err_q_min: f64,
+    #[serde(with = "sci")]
+    pub err_q_mean: f64,
+    #[serde(with = "sci")]
+    pub err_q_max: f64,
+    #[serde(with = "sci")]
+    pub err_p_min: f64,
+    #[serde(with = "sci")]
+    pub err_p_mean: f64,
+    #[serde(with = "sci")]
+    pub err_p_max: f64,
+    #[serde(with = "sci")]
+    pub err_energy_min: f64,
+    #[serde(with = "sci")]
+    pub err_energy_mean: f64,
+    #[serde(with = "sci")]
+    pub err_energy_max: f64,
+}
+
+impl From<&Row> for EnsembleRecord {
+    fn from(r: &Row) -> Self {
+        let [q, p, e] = r.err;
+        EnsembleRecord {
+            scene: r.scene.to_string(),
+            method: r.method,
+            h_or_tol: r.h_or_tol,
+            err_q_min: q.min,
+            err_q_mean: q.mean,
+            err_q_max: q.max,
+            err_p_min: p.min,
+            err_p_mean: p.mean,
+            err_p_max: p.max,
+            err_energy_min: e.min,
+            err_energy_mean: e.mean,
+            err_energy_max: e.max,
+        }
+    }
+}
+
+/// A line of `energy_balance.csv`: one sample of one long-run curve.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BalanceRecord {
+    /// The scene.
+    pub scene: String,
+    /// The method.
+    #[serde(with = "text")]
+    pub method: Method,
+    /// Its step size or tolerance.
+    #[serde(with = "sci")]
+    pub h_or_tol: f64,
+    /// Wall time of the run.
+    #[serde(with = "sci")]
+    pub seconds: f64,
+    /// The sample time.
+    #[serde(with = "sci")]
+    pub t: f64,
+    /// `E(t) − E(0) − W(t)`.
+    #[serde(with = "sci")]
+    pub energy_balance: f64,
+}
+
+impl LongRun {
+    /// The samples of every curve, as `energy_balance.csv` lines.
+    pub fn records(&self) -> Vec<BalanceRecord> {
+        let mut out = Vec::new();
+        for c in &self.curves {
+            for (t, b) in c.series.t.iter().zip(&c.series.balance) {
+                out.push(BalanceRecord {
+                    scene: self.scene.to_string(),
+                    method: c.method,
+                    h_or_tol: c.h_or_tol,
+                    seconds: c.seconds,
+                    t: *t,
+                    energy_balance: *b,
+                });
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,296 @@
+//! The Markdown section of the work-precision report.
+
+use std::fmt::Write as _;
+
+use forced_vi::Scheme;
+
+use super::figures::{Figures, BALANCE_FLOOR};
+use super::long_run::LONG_RUN_REFERENCE_H;
+use super::rows::{BalanceCurve, Failure, LongRun, OrderRow, Summary};
+use crate::report::orders::{self, Fit};
+use crate::report::plan::{Plan, PAPER_SCENE};
+use crate::report::table::{col, fmt_time, markdown};
+use crate::report::{Method, Options};
+use crate::scenes::Scene;
+
+/// The error targets of the "cheapest method" table.
+pub const TARGETS: [f64; 2] = [1e-6, 1e-10];
+
+/// What the section is written from.
+pub struct Inputs<'a> {
+    /// The command's options.
+    pub opts: &'a Options,
+    /// The grids.
+    pub plan: &'a Plan,
+    /// The selected scenes.
+    pub scenes: &'a [&'a dyn Scene],
+    /// What was measured.
+    pub summary: &'a Summary,
+    /// The plots written.
+    pub figures: &'a Figures,
+}
+
+/// The Markdown of the work-precision section.
+pub fn markdown_section(i: &Inputs<'_>) -> String {
+    let mut md = intro(i);
+    md.push_str(&scenes_and_methods(i));
+    md.push_str(&observed_orders(i.summary));
+    md.push_str(&cheapest(i.scenes, i.summary));
+    md.push_str(&plots(i.scenes, i.figures));
+    if let (Some(lr), Some(fig)) = (&i.summary.long_run, &i.figures.energy_balance) {
+        md.push_str(&long_run(lr, fig));
+    }
+    if !i.summary.failures.is_empty() {
+        md.push_str("### Runs without a result\n\n");
+        md.push_str(&markdown(
+            &i.summary.failures,
+            &[
+                col("scene", |f: &Failure| format!("`{}`", f.scene)),
+                col("method", |f: &Failure| format!("`{}`", f.method)),
+                col("h or tol", |f: &Failure| format!("{:.3e}", f.h_or_tol)),
+                col("error", |f: &Failure| f.message.replace('|', "/")),
+            ],
+        ));
+    }
+    md
+}
+
+fn intro(i: &Inputs<'_>) -> String {
+    let (opts, s) = (i.opts, i.summary);
+    let mode = if opts.quick {
+        "quick (`--quick`)"
+    } else {
+        "full"
+    };
+    let filtered = if opts.scenes.is_empty() && opts.methods.is_empty() {
+        ""
+    } else {
+        " Filtered with `--scene`/`--method`: only part of the report."
+    };
+    format!(
+        "## Work-precision report\n\n\
+         Command: `cargo run --release{}` — {mode} grid, {} measured runs, {} failed, \
+         {:.0} s in all.{filtered}\n\n\
+         Files: [`work_precision.csv`](work_precision.csv) (every run), \
+         [`orders.csv`](orders.csv) (observed orders in q), [`ensemble.csv`](ensemble.csv) \
+         (ensemble min/mean/max), [`energy_balance.csv`](energy_balance.csv) (the long run).\n\n",
+        if opts.quick { " -- --quick" } else { "" },
+        s.rows.len(),
+        s.failures.len(),
+        s.elapsed,
+    )
+}
+
+fn fmt_vec(x: &[f64]) -> String {
+    let parts: Vec<String> = x.iter().map(|v| format!("{v}")).collect();
+    format!("({})", parts.join(", "))
+}
+
+fn initial(s: &dyn Scene) -> (String, String) {
+    match (s.members(), s.initial(0)) {
+        (1, Some((q, v))) => (fmt_vec(&q), fmt_vec(&v)),
+        (_, Some((_, v))) => ("uniform in [−4, 4]² (seeded)".to_string(), fmt_vec(&v)),
+        _ => ("?".to_string(), "?".to_string()),
+    }
+}
+
+fn method_kind(m: &Method, plan: &Plan) -> (String, String) {
+    match m {
+        Method::Variational(id) => {
+            let order = Scheme::new(*id).map(|s| s.order()).unwrap_or(0);
+            let over = format!(
+                "h = T/n from min(1, T) to {} ({} per decade)",
+                plan.h_min, plan.per_decade
+            );
+            (
+                format!("forced variational integrator, order {order}"),
+                over,
+            )
+        }
+        Method::Baseline(b) => {
+            let (lo, hi) = (plan.tolerances.first(), plan.tolerances.last());
+            let over = format!(
+                "rtol = atol from {:.0e} to {:.0e}",
+                lo.copied().unwrap_or(0.0),
+                hi.copied().unwrap_or(0.0)
+            );
+            (b.description().to_string(), over)
+        }
+    }
+}
+
+fn scenes_and_methods(i: &Inputs<'_>) -> String {
+    let plan = i.plan;
+    let mut md = String::from("### Scenes\n\n");
+    md.push_str(&markdown(
+        i.scenes,
+        &[
+            col("scene", |s: &&dyn Scene| format!("`{}`", s.name())),
+            col("model", |s: &&dyn Scene| s.summary().to_string()),
+            col("members", |s: &&dyn Scene| s.members().to_string()),
+            col("q₀", |s: &&dyn Scene| initial(*s).0),
+            col("v₀", |s: &&dyn Scene| initial(*s).1),
+            col("T", |s: &&dyn Scene| s.t_final().to_string()),
+        ],
+    ));
+    let _ = write!(
+        md,
+        "\nReferences: `data/reference/<scene>.csv` from `scripts/reference.py` (Taylor series \
+         in 30-digit arithmetic, or the exact solution), embedded in the binary. Errors are \
+         max-norm errors at the final time; for the ensemble, means over the members, with \
+         steps and Newton iterations summed over the members and the wall time of the whole \
+         ensemble run in parallel (rayon).\n\n\
+         Timing: the median of repeated runs, repeated until about {} s of timing per point \
+         (at most {} repeats), on a machine with {} hardware threads shared with other work, \
+         so differences below about 30 % are noise.\n\n### Methods\n\n",
+        plan.timing_budget,
+        plan.max_repeats,
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
+    md.push_str(&markdown(
+        &i.summary.methods,
+        &[
+            col("method", |m: &Method| format!("`{m}`")),
+            col("kind", |m: &Method| method_kind(m, plan).0),
+            col("swept over", |m: &Method| method_kind(m, plan).1),
+        ],
+    ));
+    let tail = if plan.full_paper_tail {
+        format!(" (except the variational schemes on `{PAPER_SCENE}`, swept to the end)")
+    } else {
+        String::new()
+    };
+    let _ = write!(
+        md,
+        "\nThe baselines integrate the first-order form `q' = v`, `v' = E⁻¹(L_q + F − C v)` \
+         built from the same exact node kernels as the variational schemes, and are checked \
+         against the references by tests (`src/baselines.rs`). Sweeps stop early after {} \
+         points at the round-off floor or a run longer than {} s{tail}.\n\n",
+        plan.floor_points, plan.max_run_seconds,
+    );
+    md
+}
+
+fn fmt_order(f: &Option<Fit>) -> String {
+    f.as_ref()
+        .map_or("–".to_string(), |f| format!("{:.2}", f.order))
+}
+
+fn observed_orders(summary: &Summary) -> String {
+    let mut md = format!(
+        "### Observed orders\n\n\
+         Least-squares slopes of log(error) against log(h) over the asymptotic range, which \
+         sits just above the round-off floor: of the points with error between {:.0e}·s \
+         (round-off) and {:.0e}·s (pre-asymptotic), s = max(1, |reference|), the {} smallest \
+         step sizes start the fit, and larger ones join while their segment's slope stays \
+         within {} of the fit (`src/report/orders.rs`). `orders.csv` holds the order in q.\n\n",
+        orders::FLOOR,
+        orders::CEILING,
+        orders::MIN_POINTS,
+        orders::TRIM
+    );
+    md.push_str(&markdown(
+        &summary.orders,
+        &[
+            col("scene", |o: &OrderRow| format!("`{}`", o.scene)),
+            col("method", |o: &OrderRow| format!("`{}`", o.method)),
+            col("s", |o: &OrderRow| o.stages.to_string()),
+            col("expected", |o: &OrderRow| o.expected.to_string()),
+            col("q", |o: &OrderRow| fmt_order(&o.observed[0])),
+            col("p", |o: &OrderRow| fmt_order(&o.observed[1])),
+            col("energy", |o: &OrderRow| fmt_order(&o.observed[2])),
+        ],
+    ));
+    md
+}
+
+/// One line of the cheapest-method table: a scene, a target and each method's time.
+struct Cheapest {
+    scene: &'static str,
+    target: f64,
+    times: Vec<Option<f64>>,
+}
+
+fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
+    let mut lines = Vec::new();
+    for s in scenes {
+        for target in TARGETS {
+            let times = summary
+                .methods
+                .iter()
+                .map(|m| summary.cheapest_time(s.name(), m, target))
+                .collect();
+            lines.push(Cheapest {
+                scene: s.name(),
+                target,
+                times,
+            });
+        }
+    }
+    let mut cols = vec![
+        col("scene", |c: &Cheapest| format!("`{}`", c.scene)),
+        col("target", |c: &Cheapest| format!("{:.0e}", c.target)),
+    ];
+    for (k, m) in summary.methods.iter().enumerate() {
+        cols.push(col(format!("`{m}`"), move |c: &Cheapest| {
+            let best = c.times.iter().flatten().copied().min_by(f64::total_cmp);
+            match c.times[k] {
+                Some(t) if Some(t) == best => format!("**{}**", fmt_time(t)),
+                Some(t) => fmt_time(t),
+                None => "–".into(),
+            }
+        }));
+    }
+    format!(
+        "\n### Cheapest method per error target\n\n\
+         Median wall time of the cheapest measured run whose error in q is at most the \
+         target (– : never reached). **Bold**: the cheapest method.\n\n{}",
+        markdown(&lines, &cols)
+    )
+}
+
+fn plots(scenes: &[&dyn Scene], figures: &Figures) -> String {
+    let mut md = String::from("\n### Plots\n\n");
+    for s in scenes {
+        let _ = writeln!(md, "#### `{}`\n", s.name());
+        if let Some(f) = figures.error_vs_h.iter().find(|(n, _)| n == s.name()) {
+            let _ = writeln!(md, "![error against h, {}]({})\n", s.name(), f.1);
+        }
+        if let Some(f) = figures.work_precision.iter().find(|(n, _)| n == s.name()) {
+            let _ = writeln!(md, "![error against run time, {}]({})\n", s.name(), f.1);
+        }
+    }
+    md
+}
+
+fn long_run(lr: &LongRun, fig: &str) -> String {
+    let mut md = format!(
+        "### Energy balance over a long run\n\n\
+         `{}` to t = {}: the energy-balance error E(t) − E(0) − W(t), with W the work of \
+         the force (the variational schemes sum it with their own quadrature, the baselines \
+         integrate W' = F·v as an extra ODE component). All runs cost about the same: the \
+         budget is {} (`lobatto3`, h = {LONG_RUN_REFERENCE_H}). Energy-balance errors \
+         below {:.0e} (zero to round-off) are drawn at {:.0e}.\n\n\
+         ![energy balance against time]({fig})\n\n",
+        lr.scene,
+        lr.t_final,
+        fmt_time(lr.budget),
+        BALANCE_FLOOR,
+        BALANCE_FLOOR
+    );
+    let worst = |c: &BalanceCurve| c.series.balance.iter().map(|b| b.abs()).fold(0.0, f64::max);
+    md.push_str(&markdown(
+        &lr.curves,
+        &[
+            col("method", |c: &BalanceCurve| format!("`{}`", c.method)),
+            col("h or tol", |c: &BalanceCurve| format!("{:.3e}", c.h_or_tol)),
+            col("steps", |c: &BalanceCurve| c.series.steps.to_string()),
+            col("run time", |c: &BalanceCurve| fmt_time(c.seconds)),
+            col("max abs energy-balance error", move |c: &BalanceCurve| {
+                format!("{:.2e}", worst(c))
+            }),
+        ],
+    ));
+    md.push('\n');
+    md
+}

@@ -1,0 +1,225 @@
+//! One case of the work-precision study: a method swept over its grid on one scene.
+
+use forced_vi::Scheme;
+use rayon::prelude::*;
+
+use super::rows::{Failure, OrderRow, Row, Spread, Summary};
+use crate::report::orders;
+use crate::report::plan::{Plan, PAPER_SCENE};
+use crate::report::study::Study;
+use crate::report::timing;
+use crate::report::Method;
+use crate::scenes::{Outcome, Scene, SceneError};
+
+/// The rows and failures of one sweep.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Swept {
+    /// Measured points, largest `h` or tolerance first.
+    pub rows: Vec<Row>,
+    /// Points without a result.
+    pub failures: Vec<Failure>,
+}
+
+/// The sweeps of the selected scenes and methods, one at a time (they are timed).
+pub struct Sweeps<'a> {
+    /// The selected scenes.
+    pub scenes: &'a [&'a dyn Scene],
+    /// The grids.
+    pub plan: &'a Plan,
+}
+
+impl Study for Sweeps<'_> {
+    /// `(scene index, method)`.
+    type Case = (usize, Method);
+    type Row = Swept;
+    const PARALLEL: bool = false;
+
+    fn label(&self, &(i, m): &Self::Case) -> String {
+        format!("{} {m}", self.scenes[i].name())
+    }
+
+    fn run(&self, &(i, m): &Self::Case) -> Swept {
+        sweep(self.scenes[i], &m, self.plan)
+    }
+
+    fn panicked(&self, &(i, m): &Self::Case) -> Swept {
+        Swept {
+            rows: Vec::new(),
+            failures: vec![Failure {
+                scene: self.scenes[i].name(),
+                method: m,
+                h_or_tol: f64::NAN,
+                message: "the sweep panicked".into(),
+            }],
+        }
+    }
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+fn max_abs(a: &[f64]) -> f64 {
+    a.iter().map(|x| x.abs()).fold(0.0, f64::max)
+}
+
+/// The size of the reference values of a scene: `[|q|∞, |p|∞, |E|]` over all members.
+pub fn reference_scale(scene: &dyn Scene) -> [f64; 3] {
+    let mut s = [0.0f64; 3];
+    for m in 0..scene.members() {
+        if let Some(r) = scene.reference(m) {
+            s[0] = s[0].max(max_abs(&r.q));
+            s[1] = s[1].max(max_abs(&r.p));
+            s[2] = s[2].max(r.energy.abs());
+        }
+    }
+    s
+}
+
+/// Runs one method at one `h` or tolerance on every member of a scene (members in parallel).
+fn run_members(
+    scene: &dyn Scene,
+    method: &Method,
+    scheme: Option<&Scheme>,
+    x: f64,
+) -> Result<Vec<Outcome>, String> {
+    let one = |member: usize| match (method, scheme) {
+        (Method::Variational(_), Some(s)) => scene.run_variational(s, x, member),
+        (Method::Baseline(b), _) => scene.run_baseline(*b, x, member),
+        (Method::Variational(id), None) => Err(SceneError::Variational(
+            forced_vi::SchemeError::Unknown(id.to_string()).into(),
+        )),
+    };
+    let out = if scene.members() == 1 {
+        one(0).map(|o| vec![o])
+    } else {
+        (0..scene.members()).into_par_iter().map(one).collect()
+    };
+    out.map_err(|e| e.to_string())
+}
+
+/// Errors of every member against its reference, as min/mean/max over the members.
+fn spreads(scene: &dyn Scene, outcomes: &[Outcome]) -> Result<[Spread; 3], String> {
+    let mut member_errs: [Vec<f64>; 3] = Default::default();
+    for (m, o) in outcomes.iter().enumerate() {
+        let r = scene
+            .reference(m)
+            .ok_or_else(|| format!("no reference for member {m}"))?;
+        let e = [
+            max_abs_diff(&o.end.q, &r.q),
+            max_abs_diff(&o.end.p, &r.p),
+            (o.end.energy - r.energy).abs(),
+        ];
+        if !e.iter().all(|x| x.is_finite()) {
+            return Err(format!("non-finite result for member {m}"));
+        }
+        for (k, ek) in e.into_iter().enumerate() {
+            member_errs[k].push(ek);
+        }
+    }
+    Ok(member_errs.map(|v| Spread {
+        min: v.iter().copied().fold(f64::INFINITY, f64::min),
+        mean: v.iter().sum::<f64>() / v.len() as f64,
+        max: v.iter().copied().fold(0.0, f64::max),
+    }))
+}
+
+/// Measures one point: errors, steps and the median wall time. Returns the row and the time of
+/// the first repeat.
+fn measure(
+    scene: &dyn Scene,
+    method: &Method,
+    scheme: Option<&Scheme>,
+    x: f64,
+    plan: &Plan,
+) -> Result<(Row, f64), String> {
+    let timing = timing::repeated(
+        |first| plan.repeats(first),
+        || run_members(scene, method, scheme, x),
+    )?;
+    let outcomes = timing.first;
+    let row = Row {
+        scene: scene.name(),
+        method: *method,
+        h_or_tol: x,
+        steps: outcomes.iter().map(|o| o.steps).sum(),
+        newton_iters: outcomes.iter().map(|o| o.newton_iterations).sum(),
+        seconds: timing.median,
+        err: spreads(scene, &outcomes)?,
+    };
+    Ok((row, timing.first_seconds))
+}
+
+/// The grid of `method` on `scene`.
+pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method) -> Vec<f64> {
+    match method {
+        Method::Variational(_) => plan.step_sizes(scene.t_final()),
+        Method::Baseline(_) => plan.tolerances.clone(),
+    }
+}
+
+/// Sweeps one method over its grid on one scene, stopping early as [`Plan`] says.
+fn sweep(scene: &dyn Scene, method: &Method, plan: &Plan) -> Swept {
+    let scheme = method.scheme();
+    let scale = reference_scale(scene);
+    let keep_tail = plan.full_paper_tail && method.is_variational() && scene.name() == PAPER_SCENE;
+    let mut out = Swept::default();
+    let mut floor_run = 0;
+    for x in grid(plan, scene, method) {
+        match measure(scene, method, scheme.as_ref(), x, plan) {
+            Ok((row, first)) => {
+                let e = row.errors();
+                if orders::at_floor(e[0], scale[0]) && orders::at_floor(e[1], scale[1]) {
+                    floor_run += 1;
+                } else {
+                    floor_run = 0;
+                }
+                out.rows.push(row);
+                if !keep_tail && (floor_run >= plan.floor_points || first > plan.max_run_seconds) {
+                    break;
+                }
+            }
+            Err(message) => out.failures.push(Failure {
+                scene: scene.name(),
+                method: *method,
+                h_or_tol: x,
+                message,
+            }),
+        }
+    }
+    out
+}
+
+/// Fits the observed orders of every variational method on every scene.
+pub fn fit_orders(scenes: &[&dyn Scene], summary: &mut Summary) {
+    for scene in scenes {
+        let scale = reference_scale(*scene);
+        for method in summary.methods.clone() {
+            let Method::Variational(id) = method else {
+                continue;
+            };
+            let Ok(scheme) = Scheme::new(id) else {
+                continue;
+            };
+            let observed = [0, 1, 2].map(|k| {
+                let pts: Vec<(f64, f64)> = summary
+                    .rows
+                    .iter()
+                    .filter(|r| r.scene == scene.name() && r.method == method)
+                    .map(|r| (r.h_or_tol, r.errors()[k]))
+                    .collect();
+                orders::observed_order(&pts, scale[k])
+            });
+            summary.orders.push(OrderRow {
+                scene: scene.name(),
+                method,
+                stages: scheme.stages(),
+                expected: scheme.order(),
+                observed,
+            });
+        }
+    }
+}
