@@ -35,22 +35,44 @@
 #![warn(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+//! # Where things live
+//!
+//! The data path, from a model to a trajectory, one module per concern:
+//!
+//! | stage | module |
+//! |---|---|
+//! | the model: `L`, `F`, node kernels `(L_q + F, L_v)` and `A, B, C, E` (DESIGN §2) | [`model`], [`scalar`](Scalar) |
+//! | Galley's doubled Lagrangian Λ, for tests and users | [`doubled`] |
+//! | a scheme as coefficients `(d, c, b)`, `Φ`, `Ψ`, the Jacobian terms (DESIGN §3) | [`scheme`] |
+//! | the step equations: residual `G_j` and Jacobian `∂G_j/∂x_m` (DESIGN §3) | `step_equations` |
+//! | Newton's method, knowing nothing of time or schemes | [`newton`] |
+//! | initial data, the velocity solve `L_v(q, v) = p`, mass-matrix checks | [`initial`] |
+//! | the stepping loop: predictor, solve, update, subdivision, checks | [`stepper`] |
+//! | records, energy and energy balance (DESIGN §4), run totals, failures | [`trajectory`] |
+//! | the integrator builder and its run methods | [`integrator`] |
+//! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
+
 pub mod doubled;
 mod error;
+pub mod initial;
 pub mod integrator;
 pub mod model;
 pub mod newton;
 mod scalar;
 pub mod scheme;
+mod step_equations;
+pub mod stepper;
+pub mod trajectory;
 
 pub use error::{Error, NewtonFailure, SchemeError};
-pub use integrator::{
-    InitialState, Integrator, RunFailure, RunStats, StepOptions, StepRecord, Stepper, Trajectory,
-};
+pub use initial::InitialState;
+pub use integrator::{Integrator, StepOptions, MAX_KERNEL_STACK};
 pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
+pub use stepper::Stepper;
+pub use trajectory::{RunFailure, RunStats, StepRecord, StreamFailure, Trajectory};
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.
 ///

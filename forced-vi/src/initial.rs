@@ -1,0 +1,178 @@
+//! Initial data and the velocity solve `L_v(q, v) = p` (DESIGN §3, "Initial data"), with
+//! the mass-matrix checks that both need.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::error::Error;
+use crate::model::ForcedLagrangian;
+use crate::step_equations::all_finite;
+
+/// Initial data: `(q₀, v₀)` as in the paper, or `(q₀, p₀)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InitialState<const N: usize> {
+    /// Position and velocity; the momentum is `p₀ = L_v(q₀, v₀)`.
+    Velocity {
+        /// `q₀`.
+        q: [f64; N],
+        /// `v₀`.
+        v: [f64; N],
+    },
+    /// Position and momentum; the velocity solves `L_v(q₀, v₀) = p₀`.
+    Momentum {
+        /// `q₀`.
+        q: [f64; N],
+        /// `p₀`.
+        p: [f64; N],
+    },
+}
+
+impl<const N: usize> InitialState<N> {
+    /// `(q₀, v₀)`.
+    pub fn from_velocity(q: [f64; N], v: [f64; N]) -> Self {
+        InitialState::Velocity { q, v }
+    }
+    /// `(q₀, p₀)`.
+    pub fn from_momentum(q: [f64; N], p: [f64; N]) -> Self {
+        InitialState::Momentum { q, p }
+    }
+}
+
+/// Mass matrices whose equilibrated reciprocal condition is below this are singular.
+pub(crate) const MIN_MASS_RCOND: f64 = 1e-13;
+
+/// The reciprocal condition estimate and the sign of the determinant of a mass matrix,
+/// from the LU pivots of its equilibrated form `D⁻¹ E D⁻¹`, `D = diag(√max_j |E_ij|)`.
+///
+/// Equilibration makes the test scale-invariant: `diag(1e-14, 1)` is as well conditioned
+/// as the identity. `None` if a row is zero or a value is not finite.
+pub(crate) fn mass_factor<const N: usize>(e: &SMatrix<f64, N, N>) -> Option<(f64, f64)> {
+    let mut d = [0.0f64; N];
+    for (i, di) in d.iter_mut().enumerate() {
+        let m = e.row(i).amax();
+        if !(m.is_finite() && m > 0.0) {
+            return None;
+        }
+        *di = 1.0 / m.sqrt();
+    }
+    let mut a = SMatrix::<f64, N, N>::from_fn(|i, j| e[(i, j)] * d[i] * d[j]);
+    let (mut lo, mut hi, mut sign) = (f64::INFINITY, 0.0f64, 1.0f64);
+    for k in 0..N {
+        let p = (k..N).max_by(|&i, &j| a[(i, k)].abs().total_cmp(&a[(j, k)].abs()))?;
+        let piv = a[(p, k)];
+        if piv == 0.0 || !piv.is_finite() {
+            return None;
+        }
+        if p != k {
+            a.swap_rows(k, p);
+            sign = -sign;
+        }
+        sign *= piv.signum();
+        lo = lo.min(piv.abs());
+        hi = hi.max(piv.abs());
+        for i in k + 1..N {
+            let l = a[(i, k)] / piv;
+            for j in k + 1..N {
+                let u = a[(k, j)];
+                a[(i, j)] -= l * u;
+            }
+        }
+    }
+    Some((if N == 0 { 1.0 } else { lo / hi }, sign))
+}
+
+/// Checks the mass matrix at `(q, v)`; returns the sign of its determinant.
+pub(crate) fn mass_check<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    step: usize,
+    t: f64,
+) -> Result<f64, Error> {
+    let e = model.mass_matrix(q, v);
+    if !all_finite(&e) {
+        return Err(Error::NonFiniteModel { step, t });
+    }
+    match mass_factor(&e) {
+        Some((rcond, sign)) if rcond >= MIN_MASS_RCOND => Ok(sign),
+        other => Err(Error::SingularMassMatrix {
+            step,
+            t,
+            rcond: other.map_or(0.0, |(rc, _)| rc),
+        }),
+    }
+}
+
+/// Solves `L_v(q, v) = p` for `v` by a damped Newton method from `guess`.
+///
+/// One step is exact for a kinetic energy quadratic in `v` with a constant mass matrix.
+/// Otherwise it iterates, halving steps that do not reduce the residual (or leave the
+/// model's domain), until `|L_v(q, v) − p| ≤ 1e-13 (|p| + |E| |v|)` or the round-off floor
+/// of those terms, and fails with [`Error::VelocitySolveFailed`] after 60 iterations.
+pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    p: &SVector<f64, N>,
+    guess: SVector<f64, N>,
+    step: usize,
+    t: f64,
+) -> Result<SVector<f64, N>, Error> {
+    let singular = |rcond| Error::SingularMassMatrix { step, t, rcond };
+    let residual_at = |v: &SVector<f64, N>| -> Option<SVector<f64, N>> {
+        let r = model.node_gradient(q, v).lv - p;
+        all_finite(&r).then_some(r)
+    };
+    let mut v = guess;
+    if M::STRUCTURE.constant_mass {
+        let e = model.mass_matrix(q, &v);
+        let r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
+        let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
+        v += dv;
+        return if all_finite(&v) {
+            Ok(v)
+        } else {
+            Err(Error::NonFiniteModel { step, t })
+        };
+    }
+    let mut r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
+    for _ in 0..60 {
+        let e = model.mass_matrix(q, &v);
+        if !all_finite(&e) {
+            return Err(Error::NonFiniteModel { step, t });
+        }
+        let tol = 1e-13 * (p.amax() + e.amax() * v.amax()) + 4.0 * f64::MIN_POSITIVE;
+        if r.amax() <= tol {
+            return Ok(v);
+        }
+        let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
+        let mut lambda = 1.0;
+        loop {
+            let trial = v + dv * lambda;
+            if let Some(rt) = residual_at(&trial).filter(|_| all_finite(&trial)) {
+                if rt.amax() < r.amax() * (1.0 - 1e-4 * lambda) {
+                    v = trial;
+                    r = rt;
+                    break;
+                }
+            }
+            lambda *= 0.5;
+            if lambda < 1e-10 {
+                // No step reduces the residual: at the round-off floor, or stuck.
+                let floor = 64.0 * f64::EPSILON * (p.amax() + e.amax() * v.amax());
+                return if r.amax() <= floor {
+                    Ok(v)
+                } else {
+                    Err(Error::VelocitySolveFailed {
+                        step,
+                        t,
+                        residual: r.amax(),
+                    })
+                };
+            }
+        }
+    }
+    Err(Error::VelocitySolveFailed {
+        step,
+        t,
+        residual: r.amax(),
+    })
+}

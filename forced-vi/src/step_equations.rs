@@ -1,0 +1,148 @@
+//! The step equations of DESIGN §3: the residual `G_j` and its Jacobian `∂G_j/∂x_m`,
+//! assembled from the node kernels for any scheme `(d, c, b)`, in the increments
+//! `Z_j = x_j − q_k`. This is the only place where they are written.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use crate::error::NewtonFailure;
+use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
+use crate::newton::NonlinearSystem;
+use crate::scheme::Scheme;
+
+/// The nonlinear system of one step, in the increments `Z_j = x_j − q_k` (DESIGN §3).
+pub(crate) struct StepProblem<'a, M, const N: usize> {
+    pub(crate) model: &'a M,
+    pub(crate) scheme: &'a Scheme,
+    pub(crate) h: f64,
+    pub(crate) q0: SVector<f64, N>,
+    pub(crate) p0: SVector<f64, N>,
+    pub(crate) xs: Vec<SVector<f64, N>>,
+    pub(crate) vs: Vec<SVector<f64, N>>,
+    pub(crate) grads: Vec<NodeGradient<N>>,
+    pub(crate) jacs: Vec<NodeJacobian<N>>,
+    /// For a constant mass matrix, the `E` part of the Jacobian for the step size `base_h`.
+    pub(crate) base: DMatrix<f64>,
+    pub(crate) base_h: f64,
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
+    fn nodes(&mut self, z: &DVector<f64>) {
+        let s = self.scheme.stages();
+        let zs = z.as_slice();
+        let inv_h = 1.0 / self.h;
+        for i in 0..self.scheme.quadrature_nodes() {
+            let mut x = self.q0;
+            let mut v = SVector::<f64, N>::zeros();
+            for j in 1..s {
+                let zj = &zs[(j - 1) * N..j * N];
+                let (phi, psi) = (self.scheme.phi(i, j), self.scheme.psi(i, j));
+                if phi != 0.0 {
+                    for a in 0..N {
+                        x[a] += phi * zj[a];
+                    }
+                }
+                for a in 0..N {
+                    v[a] += psi * zj[a];
+                }
+            }
+            self.xs[i] = x;
+            self.vs[i] = v * inv_h;
+        }
+    }
+}
+
+pub(crate) fn all_finite<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> bool {
+    m.iter().all(|x| x.is_finite())
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        let (sch, h) = (self.scheme, self.h);
+        for i in 0..sch.quadrature_nodes() {
+            let g = self.model.node_gradient(&self.xs[i], &self.vs[i]);
+            if !(all_finite(&g.fq) && all_finite(&g.lv)) {
+                return Err(NewtonFailure::NonFinite);
+            }
+            self.grads[i] = g;
+        }
+        let rs = r.as_mut_slice();
+        for j in 0..sch.stages() - 1 {
+            let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
+            for (i, g) in self.grads.iter().enumerate() {
+                let bi = sch.b()[i];
+                let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+                for a in 0..N {
+                    gj[a] += cf * g.fq[a] + cl * g.lv[a];
+                }
+            }
+            rs[j * N..(j + 1) * N].copy_from_slice(gj.as_slice());
+        }
+        Ok(())
+    }
+
+    fn jacobian(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        let (sch, h) = (self.scheme, self.h);
+        for i in 0..sch.quadrature_nodes() {
+            let nj = self.model.node_jacobian(&self.xs[i], &self.vs[i]);
+            if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
+                return Err(NewtonFailure::NonFinite);
+            }
+            self.jacs[i] = nj;
+        }
+        let constant_mass = M::STRUCTURE.constant_mass;
+        let rows = (sch.stages() - 1) * N;
+        if constant_mass {
+            // E is the same at every node and every step: its part is built once per h.
+            if self.base_h != h {
+                let e = self.jacs[0].e;
+                let bs = self.base.as_mut_slice();
+                bs.fill(0.0);
+                for t in sch.jacobian_terms() {
+                    add_block(bs, rows, t.j, t.m, t.e / h, &e);
+                }
+                self.base_h = h;
+            }
+            jac.copy_from(&self.base);
+        } else {
+            jac.fill(0.0);
+        }
+        let js = jac.as_mut_slice();
+        for t in sch.jacobian_terms() {
+            let nj = &self.jacs[t.i];
+            if t.a != 0.0 {
+                add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+            }
+            if t.b != 0.0 {
+                add_block(js, rows, t.j, t.m, t.b, &nj.b);
+            }
+            if !constant_mass {
+                if t.c != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.c, &nj.c);
+                }
+                add_block(js, rows, t.j, t.m, t.e / h, &nj.e);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Adds `coef · blk` to block `(j, m − 1)` of a column-major matrix with `rows` rows.
+#[inline(always)]
+fn add_block<const N: usize>(
+    js: &mut [f64],
+    rows: usize,
+    j: usize,
+    m: usize,
+    coef: f64,
+    blk: &SMatrix<f64, N, N>,
+) {
+    let origin = (m - 1) * N * rows + j * N;
+    for c in 0..N {
+        let col = &mut js[origin + c * rows..origin + c * rows + N];
+        for (x, y) in col.iter_mut().zip(blk.column(c).iter()) {
+            *x += coef * y;
+        }
+    }
+}

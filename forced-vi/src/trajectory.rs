@@ -1,0 +1,117 @@
+//! What a run hands back: records with their diagnostics (DESIGN §4), run totals,
+//! trajectories and failures that keep what was computed.
+
+use nalgebra::SVector;
+
+use crate::error::Error;
+use crate::model::ForcedLagrangian;
+use crate::step_equations::all_finite;
+
+/// The state after one step, with its diagnostics (DESIGN §4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepRecord<const N: usize> {
+    /// Step index; 0 is the initial state.
+    pub step: usize,
+    /// Time `t_k`.
+    pub t: f64,
+    /// Positions `q_k`.
+    pub q: SVector<f64, N>,
+    /// Momenta `p_k`.
+    pub p: SVector<f64, N>,
+    /// Velocities, solving `L_v(q_k, v_k) = p_k`.
+    pub v: SVector<f64, N>,
+    /// Energy `v · L_v − L`.
+    pub energy: f64,
+    /// Energy-balance error `E(t_k) − E(0) − W_k`, with `W_k` the work of the force summed with
+    /// the scheme's own quadrature.
+    pub energy_balance: f64,
+    /// Newton iterations (linear solves) this step took, over all attempts.
+    pub newton_iterations: usize,
+    /// Max-norm of the final Newton residual.
+    pub residual: f64,
+    /// Substeps used: 1 normally, 2, 4, … when the step was subdivided to recover.
+    pub substeps: usize,
+}
+
+/// Totals over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunStats {
+    /// Steps completed.
+    pub steps: usize,
+    /// Newton iterations over all steps.
+    pub newton_iterations: usize,
+    /// Steps that needed subdivision.
+    pub subdivided_steps: usize,
+    /// Largest Newton iteration count of one step.
+    pub max_newton_iterations: usize,
+}
+
+/// A finished run: every record, initial state first.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory<const N: usize> {
+    /// The records, `records[0]` being the initial state.
+    pub records: Vec<StepRecord<N>>,
+    /// Totals.
+    pub stats: RunStats,
+}
+
+impl<const N: usize> Trajectory<N> {
+    /// The last record, if any.
+    pub fn last(&self) -> Option<&StepRecord<N>> {
+        self.records.last()
+    }
+}
+
+/// A run that stopped early: the error and everything computed before it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{error} ({} records kept)", trajectory.records.len())]
+pub struct RunFailure<const N: usize> {
+    /// What stopped the run.
+    #[source]
+    pub error: Error,
+    /// The records up to the failure.
+    pub trajectory: Trajectory<N>,
+}
+
+/// A streamed run that stopped early: the error and the totals up to it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{error} (after {} steps)", stats.steps)]
+pub struct StreamFailure {
+    /// What stopped the run.
+    #[source]
+    pub error: Error,
+    /// The totals up to the failure.
+    pub stats: RunStats,
+}
+
+impl From<StreamFailure> for Error {
+    fn from(f: StreamFailure) -> Error {
+        f.error
+    }
+}
+
+/// `E = v · p − L(q, v)` with `p = L_v`; `None` if not finite.
+pub(crate) fn energy<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    p: &SVector<f64, N>,
+) -> Option<f64> {
+    let e = v.dot(p) - model.lagrangian::<f64>(&(*q).into(), &(*v).into());
+    e.is_finite().then_some(e)
+}
+
+/// The first field of a record that is not finite, by name.
+pub(crate) fn non_finite_field<const N: usize>(r: &StepRecord<N>) -> Option<&'static str> {
+    [
+        ("q", all_finite(&r.q)),
+        ("p", all_finite(&r.p)),
+        ("v", all_finite(&r.v)),
+        ("energy", r.energy.is_finite()),
+        ("energy_balance", r.energy_balance.is_finite()),
+        ("residual", r.residual.is_finite()),
+    ]
+    .into_iter()
+    .find(|(_, ok)| !ok)
+    .map(|(name, _)| name)
+}
