@@ -1,0 +1,193 @@
+//! The `stability` command: stiff and extreme cases (DESIGN §6).
+//!
+//! Every case runs the variational integrator with step subdivision allowed
+//! ([`MAX_SUBDIVISIONS`] levels, so a failed step is retried as up to 64 substeps) and records
+//! one row of `stability.csv`:
+//!
+//! ```text
+//! scene,method,h,outcome,steps_done,max_newton_iters,err_final,max_energy_balance_err
+//! ```
+//!
+//! - `outcome` is `ok`, `recovered` (the run finished but at least one step needed
+//!   subdivision) or `failed:<kind>` with the [`forced_vi::Error::kind`] of the error that
+//!   stopped it. Two kinds come from this module, not from the runtime: `failed:panic` (the
+//!   run panicked; the panic is caught so that the sweep goes on) and
+//!   `failed:non_finite_result` (the runtime reported success but the final state, its error
+//!   or the energy balance is not finite). Neither should ever appear.
+//! - `steps_done`: steps completed (of the output grid; a subdivided step counts once).
+//! - `max_newton_iters`: the largest Newton iteration count of one step (over all attempts).
+//! - `err_final`: max-norm error of the positions at the final time against the scene's
+//!   reference; `NaN` for a failed run.
+//! - `max_energy_balance_err`: the largest `|E(t_k) − E(0) − W_k|` over the steps done.
+//!
+//! On the same stiff scenes the stiff baselines ([`Baseline::Bdf`], [`Baseline::Esdirk34`])
+//! run over a ladder of tolerances, and the section compares the cost (wall time) at which
+//! each method reaches a given error.
+//!
+//! # The study
+//!
+//! Two studies share the scenes of `scenes` (`problem` runs one case): the variational
+//! runs, one case per scene × scheme × step size, and the stiff-baseline runs, one per scene ×
+//! solver × tolerance. Both run in parallel (rayon), longest first. `section` writes the
+//! Markdown.
+
+use forced_vi::SchemeId;
+
+use crate::baselines::Baseline;
+use crate::report::study::{self, run_cases, Study};
+use crate::report::table::write_csv;
+use crate::report::{readme, Method, Options, ReportError};
+
+mod problem;
+pub mod rows;
+mod scenes;
+mod section;
+
+pub use rows::{BaselineRow, Outcome, Row, StabilityRecord, Summary, MAX_SUBDIVISIONS};
+pub use scenes::{CHAIN_DOF, OVERDAMPED_ZETA_100, SCENES};
+
+use scenes::Planned;
+
+/// The section name (`sections/stability.md`).
+pub const SECTION: &str = "stability";
+
+/// The variational runs: one case per scene (index) × scheme × step size.
+struct VariationalRuns<'a>(&'a [&'a Planned]);
+
+impl Study for VariationalRuns<'_> {
+    type Case = (usize, SchemeId, f64);
+    type Row = Row;
+    const PARALLEL: bool = true;
+
+    fn label(&self, &(i, id, h): &Self::Case) -> String {
+        format!("{} {id} {h:.1e}", self.0[i].0.name())
+    }
+
+    fn run(&self, &(i, id, h): &Self::Case) -> Row {
+        self.0[i].0.variational(id, h)
+    }
+
+    fn panicked(&self, &(i, id, h): &Self::Case) -> Row {
+        Row {
+            scene: self.0[i].0.name(),
+            method: id.to_string(),
+            h,
+            outcome: Outcome::Failed("panic".into()),
+            steps_done: 0,
+            max_newton_iters: 0,
+            err_final: f64::NAN,
+            max_energy_balance_err: f64::NAN,
+            subdivided_steps: 0,
+            seconds: 0.0,
+        }
+    }
+}
+
+/// The stiff-baseline runs: one case per scene (index) × solver × tolerance.
+struct BaselineRuns<'a>(&'a [&'a Planned]);
+
+impl Study for BaselineRuns<'_> {
+    type Case = (usize, Baseline, f64);
+    type Row = BaselineRow;
+    const PARALLEL: bool = true;
+
+    fn label(&self, &(i, b, tol): &Self::Case) -> String {
+        format!("{} {b} {tol:.0e}", self.0[i].0.name())
+    }
+
+    fn run(&self, &(i, b, tol): &Self::Case) -> BaselineRow {
+        self.0[i].0.baseline(b, tol)
+    }
+
+    fn panicked(&self, &(i, b, tol): &Self::Case) -> BaselineRow {
+        BaselineRow {
+            scene: self.0[i].0.name(),
+            solver: b,
+            tol,
+            err_final: f64::NAN,
+            steps: 0,
+            seconds: 0.0,
+            failure: Some("panic".into()),
+        }
+    }
+}
+
+/// The variational cases, longest runs first so that the cores finish together.
+fn variational_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, SchemeId, f64)> {
+    let filter: Vec<SchemeId> = methods
+        .iter()
+        .filter_map(|m| match m {
+            Method::Variational(id) => Some(*id),
+            Method::Baseline(_) => None,
+        })
+        .collect();
+    let mut jobs = Vec::new();
+    for (i, (_, grid)) in selected.iter().enumerate() {
+        let ids = if filter.is_empty() {
+            &grid.methods
+        } else {
+            &filter
+        };
+        for &id in ids {
+            jobs.extend(grid.hs.iter().map(|&h| (i, id, h)));
+        }
+    }
+    jobs.sort_by(|a, b| a.2.total_cmp(&b.2));
+    jobs
+}
+
+/// The baseline cases: the stiff solvers, or the implicit ones among `--method`.
+fn baseline_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, Baseline, f64)> {
+    let solvers: Vec<Baseline> = if methods.is_empty() {
+        vec![Baseline::Bdf, Baseline::Esdirk34]
+    } else {
+        methods
+            .iter()
+            .filter_map(|m| match m {
+                Method::Baseline(b) if b.is_implicit() => Some(*b),
+                _ => None,
+            })
+            .collect()
+    };
+    let mut jobs = Vec::new();
+    for (i, (_, grid)) in selected.iter().enumerate() {
+        for &b in &solvers {
+            jobs.extend(grid.tols.iter().map(|&tol| (i, b, tol)));
+        }
+    }
+    jobs
+}
+
+/// Runs the stability sweep and the stiff-baseline comparison, writes `stability.csv` and
+/// the `stability` section.
+pub fn run(opts: &Options) -> Result<Summary, ReportError> {
+    let started = std::time::Instant::now();
+    study::check_scenes(&opts.scenes, &SCENES)?;
+    let planned = scenes::plan(opts.quick)?;
+    let selected: Vec<&Planned> = planned
+        .iter()
+        .filter(|(c, _)| study::selected(&opts.scenes, c.name()))
+        .collect();
+    let jobs = variational_cases(&selected, &opts.methods);
+    let mut rows = run_cases(&VariationalRuns(&selected), &jobs, opts.progress);
+    let pos = |s: &str| SCENES.iter().position(|x| *x == s).unwrap_or(SCENES.len());
+    rows.sort_by(|a, b| {
+        (pos(a.scene), &a.method)
+            .cmp(&(pos(b.scene), &b.method))
+            .then(b.h.total_cmp(&a.h))
+    });
+    let bjobs = baseline_cases(&selected, &opts.methods);
+    let baselines = run_cases(&BaselineRuns(&selected), &bjobs, opts.progress);
+
+    std::fs::create_dir_all(&opts.out).map_err(ReportError::io(&opts.out))?;
+    let records: Vec<StabilityRecord> = rows.iter().map(Into::into).collect();
+    write_csv(&opts.out.join("stability.csv"), &records)?;
+    let summary = Summary {
+        rows,
+        baselines,
+        elapsed: started.elapsed().as_secs_f64(),
+    };
+    let md = section::markdown_section(&summary, &selected, opts.quick);
+    readme::write_section(&opts.out, SECTION, &md)?;
+    Ok(summary)
+}

@@ -1,0 +1,284 @@
+//! One stiff or extreme problem: a model with its initial data, final time and reference, run
+//! with the variational schemes (with subdivision) or a stiff baseline.
+
+use std::time::Instant;
+
+use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId};
+
+use super::rows::{BaselineRow, Outcome, Row, MAX_SUBDIVISIONS};
+use crate::baselines::{self, Baseline, OdeSystem};
+use crate::reference::Reference;
+use crate::report::timing::timed;
+use crate::report::ReportError;
+
+/// A stiff or extreme scene: a model, its initial data, final time and reference.
+pub(super) struct Problem<M, const N: usize> {
+    pub(super) name: &'static str,
+    pub(super) description: String,
+    pub(super) model: M,
+    pub(super) q0: [f64; N],
+    pub(super) v0: [f64; N],
+    /// Final time in the model's time.
+    pub(super) t_final: f64,
+    /// Model time per unit of the scene's time (`h_model = time_scale · h`).
+    pub(super) time_scale: f64,
+    /// Reference positions at `t_final`.
+    pub(super) reference: Vec<f64>,
+    /// Where the reference comes from and how accurate it is.
+    pub(super) reference_note: String,
+    /// Estimated absolute error of the reference.
+    pub(super) reference_accuracy: f64,
+}
+
+/// A problem with its model type erased.
+pub trait Case: Sync {
+    fn name(&self) -> &'static str;
+    fn description(&self) -> &str;
+    fn reference_note(&self) -> &str;
+    /// The size of the solution: max-norm of the initial and the reference positions.
+    fn scale(&self) -> f64;
+    /// Estimated absolute error of the reference.
+    fn accuracy(&self) -> f64;
+    fn variational(&self, id: SchemeId, h: f64) -> Row;
+    fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow;
+}
+
+pub(super) fn q_error(q: &[f64], reference: &[f64]) -> f64 {
+    if q.len() != reference.len() {
+        return f64::NAN;
+    }
+    q.iter()
+        .zip(reference)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, |m: f64, e| {
+            if e.is_nan() || m.is_nan() {
+                f64::NAN
+            } else {
+                m.max(e)
+            }
+        })
+}
+
+impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
+    /// Runs `id` with step `h_model` (model time) and subdivision.
+    fn run(&self, id: SchemeId, h_model: f64) -> Row {
+        let start = Instant::now();
+        let mut row = Row {
+            scene: self.name,
+            method: id.to_string(),
+            h: h_model / self.time_scale,
+            outcome: Outcome::Ok,
+            steps_done: 0,
+            max_newton_iters: 0,
+            err_final: f64::NAN,
+            max_energy_balance_err: 0.0,
+            subdivided_steps: 0,
+            seconds: 0.0,
+        };
+        let scheme = match Scheme::new(id) {
+            Ok(s) => s,
+            Err(e) => {
+                row.outcome = Outcome::Failed(forced_vi::Error::from(e).kind());
+                return row;
+            }
+        };
+        let integ = match Integrator::new(&self.model, scheme, h_model) {
+            Ok(i) => i.max_subdivisions(MAX_SUBDIVISIONS),
+            Err(e) => {
+                row.outcome = Outcome::Failed(e.kind());
+                return row;
+            }
+        };
+        let init = InitialState::from_velocity(self.q0, self.v0);
+        let mut stepper = match integ.stepper(init, self.t_final) {
+            Ok(s) => s,
+            Err(e) => {
+                row.outcome = Outcome::Failed(e.kind());
+                return row;
+            }
+        };
+        let mut last_q: Option<Vec<f64>> = None;
+        let mut max_eb: f64 = 0.0;
+        let mut error = None;
+        for rec in stepper.by_ref() {
+            match rec {
+                Ok(r) => {
+                    let eb = r.energy_balance.abs();
+                    max_eb = if eb.is_nan() || max_eb.is_nan() {
+                        f64::NAN
+                    } else {
+                        max_eb.max(eb)
+                    };
+                    last_q = Some(r.q.iter().copied().collect());
+                }
+                Err(e) => {
+                    error = Some(e);
+                    break;
+                }
+            }
+        }
+        let stats = stepper.stats();
+        row.steps_done = stats.steps;
+        row.max_newton_iters = stats.max_newton_iterations;
+        row.subdivided_steps = stats.subdivided_steps;
+        row.max_energy_balance_err = max_eb;
+        row.outcome = match error {
+            Some(e) => Outcome::Failed(e.kind()),
+            None => {
+                row.err_final = last_q.map_or(f64::NAN, |q| q_error(&q, &self.reference));
+                if !(row.err_final.is_finite() && max_eb.is_finite()) {
+                    Outcome::Failed("non_finite_result".into())
+                } else if stats.subdivided_steps > 0 {
+                    Outcome::Recovered
+                } else {
+                    Outcome::Ok
+                }
+            }
+        };
+        row.seconds = start.elapsed().as_secs_f64();
+        row
+    }
+
+    /// The final positions of a baseline run.
+    pub(super) fn baseline_q(
+        &self,
+        solver: Baseline,
+        tol: f64,
+    ) -> Result<(Vec<f64>, usize), String> {
+        let sys = OdeSystem::new(&self.model, &self.q0, &self.v0);
+        let y0 = sys.initial_state(&self.q0, &self.v0);
+        let run = baselines::solve(&sys, solver, tol, &y0, self.t_final, |_, _| {})
+            .map_err(|e| e.to_string())?;
+        Ok((run.y[..N].to_vec(), run.steps))
+    }
+}
+
+impl<M: ForcedLagrangian<N> + Sync, const N: usize> Case for Problem<M, N> {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+    fn description(&self) -> &str {
+        &self.description
+    }
+    fn reference_note(&self) -> &str {
+        &self.reference_note
+    }
+    fn scale(&self) -> f64 {
+        self.q0
+            .iter()
+            .chain(&self.reference)
+            .fold(0.0, |m: f64, x| m.max(x.abs()))
+    }
+    fn accuracy(&self) -> f64 {
+        self.reference_accuracy
+    }
+    fn variational(&self, id: SchemeId, h: f64) -> Row {
+        self.run(id, h * self.time_scale)
+    }
+    fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow {
+        let (res, seconds) = timed(|| self.baseline_q(solver, tol));
+        let (err_final, steps, failure) = match res {
+            Ok((q, steps)) => {
+                let e = q_error(&q, &self.reference);
+                if e.is_finite() {
+                    (e, steps, None)
+                } else {
+                    (f64::NAN, steps, Some("non-finite result".to_string()))
+                }
+            }
+            Err(msg) => (f64::NAN, 0, Some(msg)),
+        };
+        BaselineRow {
+            scene: self.name,
+            solver,
+            tol,
+            err_final,
+            steps,
+            seconds,
+            failure,
+        }
+    }
+}
+
+/// The last row of a reference file: `(t, q)`.
+pub(super) fn reference_end(csv: &str) -> Result<(f64, Vec<f64>), ReportError> {
+    let bad = |message: String| {
+        ReportError::Scene(crate::scenes::SceneError::Reference {
+            scene: "stability",
+            message,
+        })
+    };
+    let parsed = Reference::parse(csv).map_err(|e| bad(e.to_string()))?;
+    let end = parsed
+        .points
+        .iter()
+        .max_by(|a, b| a.t.total_cmp(&b.t))
+        .ok_or_else(|| bad("empty reference".into()))?;
+    Ok((end.t, end.q.clone()))
+}
+
+/// A fine-step variational run to use as a reference, cross-checked by a second scheme.
+pub(super) fn fine_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
+    p: &Problem<M, N>,
+    h_model: f64,
+) -> (Vec<f64>, String, f64) {
+    let end = |id: SchemeId| -> Option<Vec<f64>> {
+        let scheme = Scheme::new(id).ok()?;
+        let integ = Integrator::new(&p.model, scheme, h_model).ok()?;
+        let traj = integ
+            .run(InitialState::from_velocity(p.q0, p.v0), p.t_final)
+            .ok()?;
+        let q: Vec<f64> = traj.last()?.q.iter().copied().collect();
+        q.iter().all(|x| x.is_finite()).then_some(q)
+    };
+    let a = end(SchemeId::Lobatto(5));
+    let b = end(SchemeId::Lobatto(4));
+    match (a, b) {
+        (Some(a), Some(b)) => {
+            let d = q_error(&a, &b);
+            (
+                a,
+                format!("lobatto5 at h = {h_model:e} (lobatto4 at the same h differs by {d:.1e})"),
+                d.max(1e-15),
+            )
+        }
+        (Some(a), None) => (
+            a,
+            format!("lobatto5 at h = {h_model:e} (no cross-check)"),
+            f64::NAN,
+        ),
+        _ => (
+            vec![f64::NAN; N],
+            "reference run failed".to_string(),
+            f64::NAN,
+        ),
+    }
+}
+
+/// A baseline reference (`solver` at `tol`), cross-checked against `check` at `check_tol`.
+pub(super) fn baseline_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
+    p: &Problem<M, N>,
+    (solver, tol): (Baseline, f64),
+    (check, check_tol): (Baseline, f64),
+) -> (Vec<f64>, String, f64) {
+    match (p.baseline_q(solver, tol), p.baseline_q(check, check_tol)) {
+        (Ok((a, _)), Ok((b, _))) => {
+            let d = q_error(&a, &b);
+            (
+                a,
+                format!("{solver} at tol {tol:e} ({check} at {check_tol:e} differs by {d:.1e})"),
+                d.max(1e-15),
+            )
+        }
+        (Ok((a, _)), Err(_)) => (
+            a,
+            format!("{solver} at tol {tol:e} (no cross-check)"),
+            f64::NAN,
+        ),
+        _ => (
+            vec![f64::NAN; N],
+            "reference run failed".to_string(),
+            f64::NAN,
+        ),
+    }
+}

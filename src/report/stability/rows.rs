@@ -1,0 +1,143 @@
+//! What the stability study measures: its rows and the record of `stability.csv`.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::baselines::Baseline;
+use crate::report::table::{sci, text};
+
+/// Subdivision levels allowed per step: a failed step is retried as 2, 4, …, 64 substeps.
+pub const MAX_SUBDIVISIONS: u32 = 6;
+
+/// How one run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// Finished without subdivision, with a finite final state and error.
+    Ok,
+    /// Finished, but some steps were subdivided.
+    Recovered,
+    /// Stopped; the error kind.
+    Failed(String),
+}
+
+impl fmt::Display for Outcome {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Outcome::Ok => f.write_str("ok"),
+            Outcome::Recovered => f.write_str("recovered"),
+            Outcome::Failed(kind) => write!(f, "failed:{kind}"),
+        }
+    }
+}
+
+/// One run of a variational scheme: a row of `stability.csv`, plus what the section needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Scene name.
+    pub scene: &'static str,
+    /// Scheme name.
+    pub method: String,
+    /// Step size, in the scene's time unit.
+    pub h: f64,
+    /// How the run ended.
+    pub outcome: Outcome,
+    /// Steps completed.
+    pub steps_done: usize,
+    /// Largest Newton iteration count of one step.
+    pub max_newton_iters: usize,
+    /// Max-norm position error at the final time (`NaN` if the run failed).
+    pub err_final: f64,
+    /// Largest absolute energy-balance error over the steps done.
+    pub max_energy_balance_err: f64,
+    /// Steps that needed subdivision.
+    pub subdivided_steps: usize,
+    /// Wall time of the run, seconds.
+    pub seconds: f64,
+}
+
+/// One stiff-baseline run of the comparison.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BaselineRow {
+    /// Scene name.
+    pub scene: &'static str,
+    /// The solver.
+    pub solver: Baseline,
+    /// Tolerance (`rtol = atol`).
+    pub tol: f64,
+    /// Max-norm position error at the final time (`NaN` if it failed).
+    pub err_final: f64,
+    /// Accepted steps.
+    pub steps: usize,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Why it failed, if it did.
+    pub failure: Option<String>,
+}
+
+/// What a `stability` run produced.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Summary {
+    /// The variational rows, as written to `stability.csv`.
+    pub rows: Vec<Row>,
+    /// The stiff-baseline runs of the comparison.
+    pub baselines: Vec<BaselineRow>,
+    /// Wall time of the whole command, seconds.
+    pub elapsed: f64,
+}
+
+impl FromStr for Outcome {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "ok" => Ok(Outcome::Ok),
+            "recovered" => Ok(Outcome::Recovered),
+            _ => s
+                .strip_prefix("failed:")
+                .map(|k| Outcome::Failed(k.to_string()))
+                .ok_or_else(|| format!("unknown outcome `{s}`")),
+        }
+    }
+}
+
+/// A line of `stability.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StabilityRecord {
+    /// Scene name.
+    pub scene: String,
+    /// Scheme name.
+    pub method: String,
+    /// Step size.
+    #[serde(with = "sci")]
+    pub h: f64,
+    /// How the run ended.
+    #[serde(with = "text")]
+    pub outcome: Outcome,
+    /// Steps completed.
+    pub steps_done: usize,
+    /// Largest Newton iteration count of one step.
+    pub max_newton_iters: usize,
+    /// Max-norm position error at the final time.
+    #[serde(with = "sci")]
+    pub err_final: f64,
+    /// Largest absolute energy-balance error.
+    #[serde(with = "sci")]
+    pub max_energy_balance_err: f64,
+}
+
+impl From<&Row> for StabilityRecord {
+    fn from(r: &Row) -> Self {
+        StabilityRecord {
+            scene: r.scene.to_string(),
+            method: r.method.clone(),
+            h: r.h,
+            outcome: r.outcome.clone(),
+            steps_done: r.steps_done,
+            max_newton_iters: r.max_newton_iters,
+            err_final: r.err_final,
+            max_energy_balance_err: r.max_energy_balance_err,
+        }
+    }
+}
