@@ -25,6 +25,16 @@
 //! [`readme::write_section`] at the end of the command. Section files start with a `## `
 //! heading; they may link to files in the report folder by their bare names.
 //!
+//! # Studies and their shared parts
+//!
+//! Every command is a study ([`study::Study`]): planned cases, run by [`study::run_cases`]
+//! (rayon or one at a time, a progress bar, a catch for panics) into typed rows, which are
+//! written as CSV ([`table::write_csv`]: serde rows, the header from the field names), a
+//! Markdown section ([`table::markdown`]: rows and column specs) and figures ([`chart`] with the
+//! styles of [`style`]). Timing goes through [`timing`], observed orders through [`orders`].
+//! A command lives in its own folder: `rows.rs` (rows and CSV records), the cases and how one
+//! runs, `section.rs`, and `mod.rs` with `run`.
+//!
 //! # The work-precision report
 //!
 //! [`work_precision::run`] sweeps every selected scene ([`crate::scenes`]) with every selected
@@ -193,11 +203,6 @@ impl ReportError {
         let path = path.into();
         move |source| ReportError::Io { path, source }
     }
-}
-
-/// Formats a float for CSV: shortest round-trip form, so values read back exactly.
-pub(crate) fn csv_float(x: f64) -> String {
-    format!("{x:e}")
 }
 
 #[cfg(test)]

@@ -1,0 +1,121 @@
+//! `step-cost`: the cost of one step, generated kernels against hand-written ones, and how it
+//! scales with the model size.
+//!
+//! Writes into the report folder:
+//!
+//! ```text
+//! step_cost.csv           scene,method,n,ns_per_step_generated,ns_per_step_handwritten,ratio,
+//!                         newton_iters_per_step,allocs_per_step
+//! step_cost_scaling.svg   time per step against n for the damped spring chain
+//! sections/step_cost.md   the section of README.md (targets of issue 6, met or not)
+//! ```
+//!
+//! - `coupled_van_der_pol` rows: the paper's model ([`CoupledVanDerPol::PAPER`]) against
+//!   [`HandCoupledVanDerPol::PAPER`] for each scheme at `h = 0.01`, through the same
+//!   [`Integrator`] (same predictor, Newton options and tolerances). Repeats alternate
+//!   generated and hand-written runs so that machine noise hits both alike; the medians are
+//!   reported.
+//! - `spring_chain` rows: [`SpringChain<N>`] with `lobatto2` for `n = 2 … 2048`, no
+//!   hand-written counterpart. Each size runs in its own thread with a stack large enough for
+//!   the runtime's static `N × N` node blocks.
+//! - allocations: counted by the binary's counting allocator between the first and the last
+//!   record of a `for_each_step` run (so the stepper's one-off buffers are excluded), divided
+//!   by the steps.
+//! - compile time of a crate with one model against one with ten, and the peak RSS of a long
+//!   streamed run (full run only for the compile time).
+//!
+//! # The study
+//!
+//! The paper-model rows are a study of one case per scheme, run one at a time (they are
+//! timed); the chain sizes run in order, each deciding from the last measured size whether
+//! the next fits the time limit. `measure`, `compile`, `figures` and `section` hold the parts.
+
+use std::time::Instant;
+
+use crate::report::style;
+use crate::report::table::write_csv;
+use crate::report::{readme, Options, ReportError};
+
+mod compile;
+mod figures;
+mod measure;
+pub mod rows;
+mod section;
+
+pub use measure::{peak_rss_kib, CHAIN_SIZES, SCHEMES};
+pub use rows::{AllocCounter, CompileTimes, Memory, Row, StepCostRecord, Summary};
+
+/// The section name in `report/sections/`.
+pub const SECTION: &str = "step_cost";
+
+/// Runs the step-cost measurements and writes `step_cost.csv`, the scaling plot and the
+/// section. `counter` reads the binary's counting allocator; without it the allocation
+/// column stays empty.
+pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, ReportError> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(&opts.out).map_err(ReportError::io(&opts.out))?;
+    eprintln!("step-cost: streaming the paper model for peak RSS …");
+    let memory = measure::memory(opts.quick);
+    eprintln!("step-cost: generated against hand-written …");
+    let (mut rows, same_iterations) = measure::paper_rows(opts.quick, counter);
+    eprintln!("step-cost: spring-chain scaling …");
+    rows.extend(measure::chain_rows(opts.quick, counter));
+    let exponent = measure::fit_exponent(&rows);
+    let compile = if opts.quick {
+        Err("not measured in --quick (it builds two crates; see the full run)".to_string())
+    } else {
+        eprintln!("step-cost: compile times …");
+        compile::compile_times()
+    };
+    let records: Vec<StepCostRecord> = rows.iter().map(Into::into).collect();
+    write_csv(&opts.out.join("step_cost.csv"), &records)?;
+    let svg = opts.out.join("step_cost_scaling.svg");
+    style::register_font(&opts.out)?;
+    let plotted = figures::plot_scaling(&svg, &rows, exponent.as_ref().map(|e| e.0))
+        .map_err(style::plot_err(&svg))?;
+    let mut summary = Summary {
+        rows,
+        exponent,
+        compile,
+        memory,
+        same_iterations,
+        elapsed: 0.0,
+    };
+    summary.elapsed = t0.elapsed().as_secs_f64();
+    let md = section::markdown_section(
+        &summary,
+        opts.quick,
+        plotted.then_some("step_cost_scaling.svg"),
+    );
+    readme::write_section(&opts.out, SECTION, &md)?;
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exponent_fit() {
+        let rows: Vec<Row> = [32usize, 128, 512]
+            .iter()
+            .map(|&n| Row {
+                generated: Some((n as f64).powi(2)),
+                ..measure::skipped_chain(n, String::new())
+            })
+            .collect();
+        let (e, ns) = measure::fit_exponent(&rows).unwrap();
+        assert!((e - 2.0).abs() < 1e-9);
+        assert_eq!(ns, [32, 128, 512]);
+    }
+
+    #[test]
+    fn compile_crate_source_has_every_model() {
+        let src = compile::crate_source(10);
+        for i in 0..10 {
+            assert!(src.contains(&format!("pub fn run{i}()")));
+            assert!(src.contains(&format!("pub struct M{i}")));
+        }
+        assert!(compile::crate_source(1).contains("M0 { eps: 0.5, rho: 0.5, lambda: 0.5 }"));
+    }
+}

@@ -1,0 +1,116 @@
+//! What the step-cost study measures: its rows and the record of `step_cost.csv`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::report::table::sci;
+
+/// Reads the process's heap-allocation count (the binary's counting allocator).
+pub type AllocCounter = fn() -> u64;
+
+/// One row of `step_cost.csv`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// `coupled_van_der_pol` or `spring_chain`.
+    pub scene: String,
+    /// The scheme.
+    pub method: String,
+    /// Degrees of freedom.
+    pub n: usize,
+    /// Median ns per step with the `#[forced_lagrangian]` kernels (`None`: not measured).
+    pub generated: Option<f64>,
+    /// Median ns per step with the hand-written kernels, where there are some.
+    pub handwritten: Option<f64>,
+    /// Newton iterations per step (generated model).
+    pub iters: Option<f64>,
+    /// Heap allocations per step (generated model), if an allocation counter was given.
+    pub allocs: Option<f64>,
+    /// Why the row has no measurement, or other remarks.
+    pub note: String,
+}
+
+impl Row {
+    /// generated ÷ hand-written.
+    pub fn ratio(&self) -> Option<f64> {
+        Some(self.generated? / self.handwritten?)
+    }
+}
+
+/// Build times of the one-model and ten-model crates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompileTimes {
+    /// Seconds to rebuild the crate with one model (median of the repeats).
+    pub one: f64,
+    /// Seconds to rebuild the crate with ten models.
+    pub ten: f64,
+}
+
+/// Peak RSS readings of the streamed run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Memory {
+    /// The scheme streamed.
+    pub method: String,
+    /// VmHWM in KiB before the run.
+    pub before_kib: Option<u64>,
+    /// `(steps, VmHWM in KiB)` after that many steps.
+    pub at: Vec<(usize, Option<u64>)>,
+    /// Wall time of the whole stream, seconds.
+    pub seconds: f64,
+}
+
+/// Everything the command measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Summary {
+    /// The CSV rows.
+    pub rows: Vec<Row>,
+    /// The fitted exponent of time per step against n for n ≥ 32, and the sizes used.
+    pub exponent: Option<(f64, Vec<usize>)>,
+    /// The compile-time measurement, or why there is none.
+    pub compile: Result<CompileTimes, String>,
+    /// The streamed-memory measurement.
+    pub memory: Memory,
+    /// Whether the hand-written and generated runs took the same Newton iterations.
+    pub same_iterations: bool,
+    /// Wall time of the command.
+    pub elapsed: f64,
+}
+
+/// A line of `step_cost.csv`: times in ns per step, empty where not measured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepCostRecord {
+    /// The scene.
+    pub scene: String,
+    /// The scheme.
+    pub method: String,
+    /// Degrees of freedom.
+    pub n: usize,
+    /// Generated kernels, ns per step.
+    #[serde(with = "sci::opt")]
+    pub ns_per_step_generated: Option<f64>,
+    /// Hand-written kernels, ns per step.
+    #[serde(with = "sci::opt")]
+    pub ns_per_step_handwritten: Option<f64>,
+    /// generated ÷ hand-written.
+    #[serde(with = "sci::opt")]
+    pub ratio: Option<f64>,
+    /// Newton iterations per step.
+    #[serde(with = "sci::opt")]
+    pub newton_iters_per_step: Option<f64>,
+    /// Heap allocations per step.
+    #[serde(with = "sci::opt")]
+    pub allocs_per_step: Option<f64>,
+}
+
+impl From<&Row> for StepCostRecord {
+    fn from(r: &Row) -> Self {
+        StepCostRecord {
+            scene: r.scene.clone(),
+            method: r.method.clone(),
+            n: r.n,
+            ns_per_step_generated: r.generated,
+            ns_per_step_handwritten: r.handwritten,
+            ratio: r.ratio(),
+            newton_iters_per_step: r.iters,
+            allocs_per_step: r.allocs,
+        }
+    }
+}
