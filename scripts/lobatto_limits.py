@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Lobatto nodes, weights and predictor growth to 60 digits, for the stage cap.
 
-Usage: python3 scripts/lobatto_limits.py > data/lobatto_predictor.csv
-Writes the exact nodes and weights to data/lobatto_exact.csv for
+Usage: python3 scripts/lobatto_limits.py > forced-vi/data/lobatto_predictor.csv
+Writes the exact nodes and weights to forced-vi/data/lobatto_exact.csv for
 the Rust test that compares the f64 implementation with them, and prints the Lebesgue
 constant of the extrapolating predictor, max_j sum_m |l_m(1 + d_j)|.
 """
@@ -12,7 +12,7 @@ from fractions import Fraction
 
 mp.mp.dps = 60
 HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, '..', 'data', 'lobatto_exact.csv')
+OUT = os.path.join(HERE, '..', 'forced-vi', 'data', 'lobatto_exact.csv')
 
 
 def nodes_weights(s):

@@ -86,7 +86,7 @@ pub const MAX_STAGES: usize = 32;
 
 /// Largest Lebesgue constant `max_j Σ_m |ℓ_m(1 + d_j)|` for which the predictor
 /// extrapolates the previous step's polynomial. It grows like 5.8^s (589 at s = 5, 6.9e5 at
-/// s = 9, 4.4e32 at s = 44; `data/lobatto_predictor.csv`); it multiplies the round-off of the
+/// s = 9, 4.4e32 at s = 44; `forced-vi/data/lobatto_predictor.csv`); it multiplies the round-off of the
 /// previous step, so beyond this the predictor is a straight line along the velocity.
 const MAX_PREDICTOR_LEBESGUE: f64 = 1e6;
 
@@ -533,7 +533,7 @@ mod accuracy {
     /// Max error of the f64 nodes and weights against the 60-digit values of
     /// `scripts/lobatto_limits.py`, per stage count.
     pub(super) fn errors() -> Vec<(usize, f64, f64)> {
-        let text = include_str!("../../data/lobatto_exact.csv");
+        let text = include_str!("../data/lobatto_exact.csv");
         let mut out: Vec<(usize, f64, f64)> = Vec::new();
         for line in text.lines().skip(1) {
             let f: Vec<&str> = line.split(',').collect();
