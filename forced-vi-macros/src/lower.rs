@@ -255,10 +255,11 @@ impl Lowered {
         self.uses.extend(o.uses.iter().copied());
         self.names.extend(o.names.iter().cloned());
     }
-    /// The tokens, in parentheses unless atomic.
+    /// The tokens, in parentheses unless atomic (a block or an `if` is parenthesised too: at
+    /// the start of a statement it would end the expression).
     fn operand(&self) -> TokenStream {
         let t = &self.tokens;
-        if self.atomic {
+        if self.atomic && !self.stmt_like {
             t.clone()
         } else {
             quote!((#t))
@@ -376,6 +377,8 @@ pub struct Lowerer<'a> {
     pub checked_index: Rc<Cell<bool>>,
     /// Inside a branch that no evaluation reaches (its condition is false for every value).
     dead: usize,
+    /// The next `block`/`lift_branch` lifts an integer value to `f64` rather than `__D`.
+    lift_real: bool,
     /// Where the expression is, for messages: "the Lagrangian", "the force on `x`".
     place: String,
 }
@@ -392,6 +395,7 @@ impl<'a> Lowerer<'a> {
             budget: Rc::new(Cell::new(BUDGET)),
             checked_index: Rc::new(Cell::new(false)),
             dead: 0,
+            lift_real: false,
             place: place.into(),
         }
     }
@@ -686,7 +690,7 @@ impl<'a> Lowerer<'a> {
             // num-dual has `D ∘ f64` only: put the dual operand first.
             let (lo, ro) = (l.operand(), r.operand());
             match b.op {
-                BinOp::Add(_) => quote!(#rt + #lo),
+                BinOp::Add(_) => quote!(#ro + #lo),
                 BinOp::Mul(_) => quote!(#ro * #lo),
                 BinOp::Sub(_) => quote_spanned!(span=> -#ro + #lo),
                 _ => {
@@ -788,7 +792,7 @@ impl<'a> Lowerer<'a> {
         if lkind != Kind::Int {
             r.make_real();
         }
-        let rt = if lkind == Kind::Dual && op.is_none() {
+        let rt = if lkind == Kind::Dual {
             r.as_dual(right.span())
         } else {
             r.tokens.clone()
@@ -856,7 +860,23 @@ impl<'a> Lowerer<'a> {
             out.tokens = quote!(#rt.#method(#(#at),*));
             return out;
         }
-        // Everything else is real arithmetic: integer literals become `f64`.
+        // Everything else is real arithmetic: integer literals become `f64` (a receiver
+        // suffixed, `2.0_f64.sqrt()`, so that its type is known).
+        if let Some(x) = float_literal(&m.receiver) {
+            let l = proc_macro2::Literal::f64_suffixed(x);
+            recv.tokens = quote!(#l);
+            recv.atomic = true;
+        }
+        if recv.kind == Kind::Int {
+            if let Some(x) = recv.lit_f64.or_else(|| recv.int().map(|k| k as f64)) {
+                if x.is_finite() {
+                    let l = proc_macro2::Literal::f64_suffixed(x.abs());
+                    recv.tokens = if x < 0.0 { quote!((-#l)) } else { quote!(#l) };
+                    recv.kind = Kind::Real;
+                    recv.atomic = true;
+                }
+            }
+        }
         recv.make_real();
         if name != "powi" {
             for a in &mut args {
@@ -1095,8 +1115,19 @@ impl<'a> Lowerer<'a> {
         out
     }
 
-    /// A block; with `lift_tail`, its value is turned into a `__D`.
+    /// A block; with `lift_tail`, its value is turned into a `__D` (or, with `real`, an
+    /// integer value into an `f64`).
     fn block(&mut self, b: &syn::Block, lift_tail: bool) -> Lowered {
+        let real = self.lift_real;
+        self.lift_real = false;
+        let mut out = self.block_inner(b, lift_tail, real);
+        if real && lift_tail {
+            out.kind = Kind::Real;
+        }
+        out
+    }
+
+    fn block_inner(&mut self, b: &syn::Block, lift_tail: bool, real: bool) -> Lowered {
         self.scopes.push(HashMap::new());
         let mut out = Lowered::new(TokenStream::new(), Kind::Unit);
         let mut stmts = TokenStream::new();
@@ -1112,7 +1143,9 @@ impl<'a> Lowerer<'a> {
                         out.degree = le.degree;
                         out.range = le.range;
                         out.lit_f64 = le.lit_f64;
-                        let t = if lift_tail {
+                        let t = if lift_tail && real {
+                            le.as_real()
+                        } else if lift_tail {
                             out.kind = Kind::Dual;
                             le.as_dual(e.span())
                         } else {
@@ -1226,11 +1259,34 @@ impl<'a> Lowerer<'a> {
         out.degree = degree;
         out.range = join_range(then_b.range, else_b.range);
         let real_like = |k: &Kind| matches!(k, Kind::Real | Kind::Int | Kind::Dual);
-        let mixed = then_b.kind != else_b.kind
-            && real_like(&then_b.kind)
-            && real_like(&else_b.kind)
-            && (then_b.kind == Kind::Dual || else_b.kind == Kind::Dual);
-        let (tt, et) = if mixed {
+        let mixed =
+            then_b.kind != else_b.kind && real_like(&then_b.kind) && real_like(&else_b.kind);
+        let to_real = mixed && then_b.kind != Kind::Dual && else_b.kind != Kind::Dual;
+        let (tt, et) = if to_real {
+            // An integer branch beside an `f64` one: the integer is a number.
+            out.kind = Kind::Real;
+            out.range = None;
+            let Some((_, else_expr)) = &i.else_branch else {
+                return out;
+            };
+            let t = if then_b.kind == Kind::Int {
+                self.silently(|l| {
+                    l.lift_real = true;
+                    l.block(&i.then_branch, true).tokens
+                })
+            } else {
+                then_b.tokens.clone()
+            };
+            let e = if else_b.kind == Kind::Int {
+                self.silently(|l| {
+                    l.lift_real = true;
+                    l.lift_branch(else_expr)
+                })
+            } else {
+                else_b.tokens.clone()
+            };
+            (t, e)
+        } else if mixed {
             out.kind = Kind::Dual;
             let Some((_, else_expr)) = &i.else_branch else {
                 return out;
@@ -1469,14 +1525,17 @@ impl<'a> Lowerer<'a> {
         body
     }
 
-    /// An `else` branch whose value is lifted to `__D`.
+    /// An `else` branch whose value is lifted to `__D` (to `f64` with `lift_real`).
     fn lift_branch(&mut self, e: &Expr) -> TokenStream {
+        let real = self.lift_real;
         match e {
             Expr::Block(b) => self.block(&b.block, true).tokens,
             Expr::If(i) => {
                 let cond = self.expr(&i.cond);
                 let ct = &cond.tokens;
+                self.lift_real = real;
                 let tt = self.block(&i.then_branch, true).tokens;
+                self.lift_real = real;
                 let if_token = &i.if_token;
                 match &i.else_branch {
                     Some((_, e)) => {
@@ -1487,8 +1546,13 @@ impl<'a> Lowerer<'a> {
                 }
             }
             other => {
+                self.lift_real = false;
                 let l = self.expr(other);
-                l.as_dual(other.span())
+                if real {
+                    l.as_real()
+                } else {
+                    l.as_dual(other.span())
+                }
             }
         }
     }
@@ -1505,6 +1569,7 @@ impl<'a> Lowerer<'a> {
             budget: Rc::clone(&self.budget),
             checked_index: Rc::new(Cell::new(false)),
             dead: self.dead,
+            lift_real: false,
             place: self.place.clone(),
         };
         let out = f(&mut l);
@@ -1571,6 +1636,17 @@ impl<'a> Lowerer<'a> {
         let (st, et, limits) = (s.operand(), e.operand(), &r.limits);
         out.tokens = quote!(#st #limits #et);
         out
+    }
+}
+
+/// An unsuffixed, finite float literal (through parentheses).
+fn float_literal(e: &Expr) -> Option<f64> {
+    match e {
+        Expr::Paren(p) => float_literal(&p.expr),
+        Expr::Lit(syn::ExprLit {
+            lit: Lit::Float(f), ..
+        }) if f.suffix().is_empty() => f.base10_parse::<f64>().ok().filter(|x| x.is_finite()),
+        _ => None,
     }
 }
 

@@ -1,0 +1,293 @@
+//! Issue 10, the macro's classes: `STRUCTURE` claims and specialised kernels that must agree
+//! with the general dual-number path (classes 5 and 6), out-of-range indices that must be
+//! typed errors or NaN, never a panic (class 7), accepted syntax (class 10) and the kernel
+//! stack bound.
+
+use forced_vi::model::general;
+use forced_vi::prelude::*;
+use forced_vi::{Error, NodeJacobian};
+use nalgebra::SVector;
+
+fn close(a: f64, b: f64) -> bool {
+    a == b || (a - b).abs() <= 1e-10 * (1.0 + a.abs().max(b.abs()))
+}
+
+/// Every block of the generated kernels equals the general path at `(q, v)`.
+fn assert_matches_general<M: ForcedLagrangian<N>, const N: usize>(m: &M, q: [f64; N], v: [f64; N]) {
+    let (q, v) = (SVector::from(q), SVector::from(v));
+    let s: NodeJacobian<N> = m.node_jacobian(&q, &v);
+    let g: NodeJacobian<N> = general::node_jacobian(m, &q, &v);
+    let blocks = [
+        ("fq", s.grad.fq.as_slice(), g.grad.fq.as_slice()),
+        ("lv", s.grad.lv.as_slice(), g.grad.lv.as_slice()),
+        ("a", s.a.as_slice(), g.a.as_slice()),
+        ("b", s.b.as_slice(), g.b.as_slice()),
+        ("c", s.c.as_slice(), g.c.as_slice()),
+        ("e", s.e.as_slice(), g.e.as_slice()),
+    ];
+    for (name, x, y) in blocks {
+        for (k, (a, b)) in x.iter().zip(y).enumerate() {
+            assert!(close(*a, *b), "{name}[{k}]: kernel {a:e}, general {b:e}");
+        }
+    }
+    let gr = m.node_gradient(&q, &v);
+    let gg = general::node_gradient(m, &q, &v);
+    for k in 0..N {
+        assert!(close(gr.fq[k], gg.fq[k]) && close(gr.lv[k], gg.lv[k]));
+    }
+    let mass = m.mass_matrix(&q, &v);
+    for (a, b) in mass.iter().zip(g.e.iter()) {
+        assert!(close(*a, *b), "mass matrix: {a:e} vs {b:e}");
+    }
+}
+
+// Class 5: an `if` without `else` and a loop make the mass depend on the velocity.
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = -0.5 * x * x + {
+        let mut m = 1.0;
+        if x_dot > 0.0 {
+            m = 3.0;
+        }
+        0.5 * m * x_dot * x_dot
+    },
+)]
+struct IfMass {}
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = -0.5 * x * x + {
+        let mut s = 1.0;
+        for _k in 0..4 {
+            s = s * x_dot;
+        }
+        0.25 * s
+    },
+)]
+struct LoopMass {}
+
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = {
+        let mut s = 0.0;
+        for _k in 0..3 {
+            s += 0.5 * x_dot * x_dot;
+        }
+        s
+    } + 0.5 * y_dot * y_dot - {
+        let mut w = 1.0;
+        let mut t = 0.0;
+        for _k in 0..2 {
+            t = w;
+            w = y;
+        }
+        t * x * x
+    },
+    force(x = { let mut f = 0.0; if y > 0.5 { f = -x_dot; } f }, y = 0.0),
+)]
+struct LoopCarried {}
+
+#[test]
+fn trust_if_without_else_claims_nothing() {
+    assert!(!IfMass::STRUCTURE.constant_mass);
+    let m = IfMass {};
+    assert_matches_general(&m, [0.5], [1.0]);
+    assert_matches_general(&m, [0.5], [-1.0]);
+    let e_pos = m.mass_matrix(&[0.5].into(), &[1.0].into())[(0, 0)];
+    let e_neg = m.mass_matrix(&[0.5].into(), &[-1.0].into())[(0, 0)];
+    assert_eq!((e_pos, e_neg), (3.0, 1.0));
+}
+
+#[test]
+fn trust_loop_degree_is_a_fixpoint() {
+    assert!(!LoopMass::STRUCTURE.constant_mass);
+    let m = LoopMass {};
+    for v in [0.3, 1.0, 2.0] {
+        assert_matches_general(&m, [0.5], [v]);
+    }
+    // An accumulator of quadratic terms keeps a constant mass.
+    assert!(LoopCarried::STRUCTURE.constant_mass);
+    // A value carried from one iteration to the next (`t = w; w = y`) and a force chosen
+    // by a condition on `y` still get every dependence.
+    assert!(LoopCarried::STRUCTURE.force_uses_velocity);
+    let m = LoopCarried {};
+    assert_matches_general(&m, [0.4, 0.7], [0.3, -0.2]);
+    assert_matches_general(&m, [0.4, 0.2], [0.3, -0.2]);
+}
+
+// Class 6: compile-time derivatives never drop an overflowing coefficient.
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 1e308 * x * x,
+    force(x = -1e308 * x * x * x_dot),
+)]
+struct Huge {}
+
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 0.9e308 * x * x - 0.9e308 * x * x + 1e-200 * 1e-200 * 1e250 * y * y,
+)]
+struct HugeSum {}
+
+#[test]
+fn trust_overflowing_coefficients_take_the_dual_path() {
+    let m = Huge {};
+    let j = m.node_jacobian(&[1e-10].into(), &[0.3].into());
+    assert!(
+        j.grad.fq[0] != 0.0,
+        "L_q + F must not vanish: {:e}",
+        j.grad.fq[0]
+    );
+    assert_matches_general(&m, [1e-10], [0.3]);
+    assert_matches_general(&m, [1e-160], [1e-3]);
+    let m = HugeSum {};
+    assert_matches_general(&m, [1e-10, 0.5], [0.3, 0.1]);
+}
+
+// Class 7: indices.
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum() + q_dot[2],
+)]
+struct VelocityPastEnd<const N: usize> {}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum(),
+    force(q[i] = -k * (q[i] - q[i + 1])),
+)]
+struct ForcePastEnd<const N: usize> {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..N).map(|i| if i + 1 < N { 0.5 * (q[i + 1] - q[i]).powi(2) } else { 0.0 }).sum(),
+    force(q[i] = if i == 0 { -c * q_dot[i] } else { -c * (q_dot[i] - q_dot[i - 1]) }),
+)]
+struct Guarded<const N: usize> {
+    c: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        + if q[0] > 0.0 { q[N] } else { 0.0 },
+)]
+struct DataDependentIndex<const N: usize> {}
+
+#[test]
+fn trust_const_generic_index_out_of_range_is_a_typed_error() {
+    let h = 0.1;
+    let m = VelocityPastEnd::<2> {};
+    match Integrator::new(&m, Scheme::midpoint(), h) {
+        Err(Error::InvalidModel { message }) => assert!(message.contains("q_dot[2]"), "{message}"),
+        Err(e) => panic!("wrong error {e}"),
+        Ok(_) => panic!("q_dot[2] at N = 2 accepted"),
+    }
+    assert!(VelocityPastEnd::<3> {}.check_model().is_ok());
+    for n_ok in [
+        ForcePastEnd::<2> { k: 1.0 }.check_model(),
+        ForcePastEnd::<2> { k: 1.0 }.check_model(),
+    ] {
+        assert!(n_ok.is_err_and(|m| m.contains("q[i + 1]")));
+    }
+    match Integrator::new(&ForcePastEnd::<4> { k: 1.0 }, Scheme::midpoint(), h) {
+        Err(Error::InvalidModel { .. }) => {}
+        other => panic!("expected InvalidModel, got {:?}", other.err()),
+    }
+}
+
+#[test]
+fn trust_guarded_indices_are_accepted_and_exact() {
+    let m = Guarded::<3> { c: 0.2 };
+    assert!(m.check_model().is_ok());
+    assert!(Integrator::new(&m, Scheme::midpoint(), 0.1).is_ok());
+    assert_matches_general(&m, [0.1, -0.2, 0.3], [0.5, 0.1, -0.4]);
+    let m = Guarded::<1> { c: 0.2 };
+    assert!(m.check_model().is_ok());
+    assert_matches_general(&m, [0.1], [0.5]);
+}
+
+#[test]
+fn trust_data_dependent_index_is_nan_not_a_panic() {
+    let m = DataDependentIndex::<2> {};
+    // Not reached at the check's point, so the model is accepted ...
+    assert!(m.check_model().is_ok());
+    // ... and where it is reached, the model's value is NaN (so the energy is not finite
+    // and the run reports it) instead of a panic; the kernels run too.
+    assert!(m.lagrangian::<f64>(&[0.5, 0.0], &[0.1, 0.2]).is_nan());
+    let _ = m.node_gradient(&[0.5, 0.0].into(), &[0.1, 0.2].into());
+    let _ = m.node_jacobian(&[0.5, 0.0].into(), &[0.1, 0.2].into());
+    let _ = m.mass_matrix(&[0.5, 0.0].into(), &[0.1, 0.2].into());
+    assert_matches_general(&m, [-0.5, 0.0], [0.1, 0.2]);
+}
+
+// Class 10: accepted syntax.
+
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = { x_dot * x_dot / 2 } + y_dot * y_dot / 2 - 2 * x * y - k.powf(x) - x.max(y) - x.min(y) * 3 / 2,
+    force(x = -x_dot / 10, y = 1),
+)]
+struct Ints {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = if k > 0.0 { 0.5 * x_dot * x_dot } else { x_dot * x_dot } - 0.5 * x * x,
+)]
+struct IfFirst {
+    k: f64,
+}
+
+#[test]
+fn trust_integer_literals_and_methods() {
+    let m = Ints { k: 2.0 };
+    for (q, v) in [([0.5, 0.2], [0.3, 0.1]), ([-0.5, 0.7], [0.3, -1.0])] {
+        assert_matches_general(&m, q, v);
+    }
+    // ½ẋ² − 2xy − kˣ − max(x, y) − min(x, y)·3/2 at x = 0.5 > y = 0.2: L_x = −2y − kˣ ln k − 1.
+    let g = m.node_gradient(&[0.5, 0.2].into(), &[0.3, 0.1].into());
+    let want = -2.0 * 0.2 - 2f64.powf(0.5) * 2f64.ln() - 1.0 - 0.03;
+    assert!(close(g.fq[0], want), "{} vs {want}", g.fq[0]);
+    let m = IfFirst { k: 1.0 };
+    assert_matches_general(&m, [0.5], [0.3]);
+}
+
+// The kernel stack bound covers the kernels: they run on a thread whose stack is exactly
+// `KERNEL_STACK_BYTES` (a debug build, without inlining, needs the most).
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * (1.0 + q[i] * q[i]) * q_dot[i] * q_dot[i]).sum()
+        - (0..N).map(|i| q[i].cos()).sum(),
+    force(q[i] = -c * q_dot[i] * q[i]),
+)]
+struct Dense<const N: usize> {
+    c: f64,
+}
+
+#[test]
+fn trust_kernels_fit_their_stack_bound() {
+    const N: usize = 24;
+    let bytes = <Dense<N> as ForcedLagrangian<N>>::KERNEL_STACK_BYTES;
+    let run = std::thread::Builder::new()
+        .stack_size(bytes)
+        .spawn(|| {
+            let m = Dense::<N> { c: 0.1 };
+            let q = SVector::<f64, N>::from_fn(|i, _| 0.1 * i as f64);
+            let v = SVector::<f64, N>::from_fn(|i, _| 0.05 * i as f64);
+            let j = m.node_jacobian(&q, &v);
+            let g = m.node_gradient(&q, &v);
+            let e = m.mass_matrix(&q, &v);
+            j.a[(0, 0)] + g.fq[0] + e[(0, 0)]
+        })
+        .map(|h| h.join());
+    assert!(matches!(run, Ok(Ok(x)) if x.is_finite()));
+}
