@@ -104,6 +104,10 @@ pub trait Scene: Send + Sync {
         h: f64,
         member: usize,
     ) -> Result<Outcome, SceneError>;
+    /// Runs a variational scheme adaptively at `rtol = atol = tol` to the final time, from
+    /// a first step of `t_final` (the controller shrinks it).
+    fn run_adaptive(&self, scheme: &Scheme, tol: f64, member: usize)
+        -> Result<Outcome, SceneError>;
     /// Runs a baseline at tolerance `tol` to the final time.
     fn run_baseline(
         &self,
@@ -243,6 +247,31 @@ impl Sampler {
     }
 }
 
+impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
+    /// Runs `integ` on a member to the final time, keeping only the last record.
+    fn run_with(&self, integ: Integrator<'_, M, N>, member: usize) -> Result<Outcome, SceneError> {
+        let (q0, v0) = self.start(member)?;
+        let mut last = None;
+        let stats = integ
+            .for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
+                last = Some((r.q, r.p, r.energy));
+            })
+            .map_err(|f| f.error)?;
+        let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
+            t_final: self.t_final,
+        })?;
+        Ok(Outcome {
+            end: FinalState {
+                q: q.as_slice().to_vec(),
+                p: p.as_slice().to_vec(),
+                energy,
+            },
+            steps: stats.steps,
+            newton_iterations: stats.newton_iterations,
+        })
+    }
+}
+
 impl<M, const N: usize> Scene for ModelScene<M, N>
 where
     M: ForcedLagrangian<N> + Send + Sync,
@@ -277,28 +306,19 @@ where
         h: f64,
         member: usize,
     ) -> Result<Outcome, SceneError> {
-        let (q0, v0) = self.start(member)?;
-        let integ = Integrator::new(&self.model, scheme.clone(), h)?;
-        let mut last = None;
-        let stats = integ
-            .for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
-                last = Some((r.q, r.p, r.energy));
-            })
-            .map_err(|f| f.error)?;
-        let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
-            t_final: self.t_final,
-        })?;
-        Ok(Outcome {
-            end: FinalState {
-                q: q.as_slice().to_vec(),
-                p: p.as_slice().to_vec(),
-                energy,
-            },
-            steps: stats.steps,
-            newton_iterations: stats.newton_iterations,
-        })
+        self.run_with(Integrator::new(&self.model, scheme.clone(), h)?, member)
     }
 
+    fn run_adaptive(
+        &self,
+        scheme: &Scheme,
+        tol: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError> {
+        let h0 = self.t_final;
+        let integ = Integrator::new(&self.model, scheme.clone(), h0)?.tolerances(tol, tol)?;
+        self.run_with(integ, member)
+    }
     fn run_baseline(
         &self,
         solver: Baseline,

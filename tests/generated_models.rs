@@ -2,7 +2,7 @@
 //! (sums, products, `powi`, `sin`, `if` with and without `else`, `let`, `for` loops,
 //! `.map().sum()`, integer literals) whose `STRUCTURE` claims and specialised kernels are
 //! compared with the general dual-number path at random points (issue 10).
-#![allow(clippy::all, unused_parens, unused_braces)]
+#![allow(clippy::all, unused_parens, unused_braces, unused_variables)]
 
 use forced_vi::model::general;
 use forced_vi::prelude::*;

@@ -2,6 +2,9 @@
 //! with the general dual-number path (classes 5 and 6), out-of-range indices that must be
 //! typed errors or NaN, never a panic (class 7), accepted syntax (class 10) and the kernel
 //! stack bound.
+// The models are written as a user would (`s = s * x_dot`), and the claims under test are
+// constants.
+#![allow(clippy::assign_op_pattern, clippy::assertions_on_constants)]
 
 use forced_vi::model::general;
 use forced_vi::prelude::*;

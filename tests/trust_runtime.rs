@@ -132,8 +132,8 @@ struct Chain<const N: usize>;
 impl<const N: usize> ForcedLagrangian<N> for Chain<N> {
     fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D {
         let mut l = D::from(0.0);
-        for i in 0..N {
-            l += v[i] * v[i] * 0.5;
+        for vi in v {
+            l += *vi * *vi * 0.5;
         }
         for i in 0..=N {
             let left = if i == 0 { D::from(0.0) } else { q[i - 1] };

@@ -128,6 +128,35 @@ pub enum Error {
         /// The cap.
         max: usize,
     },
+    /// A tolerance is negative, not finite, or zero together with its partner.
+    #[error("tolerance of coordinate {index} is invalid (rtol = {rtol}, atol = {atol}): both must be finite and non-negative, not both zero")]
+    InvalidTolerance {
+        /// The coordinate.
+        index: usize,
+        /// Its relative tolerance.
+        rtol: f64,
+        /// Its absolute tolerance.
+        atol: f64,
+    },
+    /// An adaptive run needed a step below the smallest step that `f64` time can resolve.
+    #[error("step size {h:e} at t = {t} is too small for the tolerance")]
+    StepSizeTooSmall {
+        /// Where the run stopped.
+        t: f64,
+        /// The step it needed.
+        h: f64,
+    },
+    /// An adaptive run reached its step cap ([`crate::StepOptions::max_steps`]).
+    #[error("step cap of {steps} steps reached at t = {t}")]
+    MaxStepsReached {
+        /// Where the run stopped.
+        t: f64,
+        /// The cap.
+        steps: usize,
+    },
+    /// Output times that decrease.
+    #[error("output times must be non-decreasing")]
+    UnorderedTimes,
     /// The initial data contain NaN or infinity.
     #[error("initial {what}[{index}] is not finite")]
     NonFiniteInitialData {
@@ -203,6 +232,10 @@ impl Error {
             Error::NonFiniteParameter { .. } => "non_finite_parameter".into(),
             Error::NonFiniteInitialData { .. } => "non_finite_initial_data".into(),
             Error::InvalidModel { .. } => "invalid_model".into(),
+            Error::InvalidTolerance { .. } => "invalid_tolerance".into(),
+            Error::UnorderedTimes => "unordered_times".into(),
+            Error::StepSizeTooSmall { .. } => "step_size_too_small".into(),
+            Error::MaxStepsReached { .. } => "max_steps_reached".into(),
             Error::InvalidNewtonOptions { .. } => "invalid_newton_options".into(),
             Error::TooManySteps { .. } => "too_many_steps".into(),
             Error::TooManyRecords { .. } => "too_many_records".into(),

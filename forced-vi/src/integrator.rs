@@ -1,13 +1,16 @@
 //! The integrator: a model, a scheme and a step size, with the options of a run, and the
 //! ways to run it (collect, stream, iterate).
 
+use crate::control::Tolerance;
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
 use crate::stepper::Stepper;
-use crate::trajectory::{RunFailure, RunStats, StepRecord, StreamFailure, Trajectory};
+use crate::trajectory::{
+    hermite, DenseState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure, Trajectory,
+};
 
 /// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
 /// [`StepOptions::DEFAULT_MAX_STEPS`] steps.
@@ -66,6 +69,8 @@ pub struct Integrator<'m, M, const N: usize> {
     pub(crate) scheme: Scheme,
     pub(crate) h: f64,
     pub(crate) options: StepOptions,
+    /// With tolerances the run is adaptive and `h` is only its first step.
+    pub(crate) tolerance: Option<Tolerance<N>>,
 }
 
 // By hand: the model is borrowed, so neither needs `M: Clone` or `M: Debug`.
@@ -76,6 +81,7 @@ impl<M, const N: usize> Clone for Integrator<'_, M, N> {
             scheme: self.scheme.clone(),
             h: self.h,
             options: self.options,
+            tolerance: self.tolerance,
         }
     }
 }
@@ -87,6 +93,7 @@ impl<M, const N: usize> std::fmt::Debug for Integrator<'_, M, N> {
             .field("scheme", &self.scheme.id())
             .field("h", &self.h)
             .field("options", &self.options)
+            .field("tolerance", &self.tolerance)
             .finish()
     }
 }
@@ -121,6 +128,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             scheme,
             h,
             options: StepOptions::default(),
+            tolerance: None,
         })
     }
 
@@ -136,6 +144,41 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     #[must_use]
     pub fn max_subdivisions(mut self, levels: u32) -> Self {
         self.options.max_subdivisions = levels.min(Self::MAX_SUBDIVISION_LEVELS);
+        self
+    }
+
+    /// Makes the run adaptive: steps are chosen to keep the error within `rtol · |y| + atol`
+    /// (positions and momenta), and `h` becomes the first step. See [`crate::control`] for
+    /// the estimate and the controller. Fails unless both are finite, non-negative and not
+    /// both zero.
+    ///
+    /// ```
+    /// use forced_vi::prelude::*;
+    /// # struct Oscillator;
+    /// # impl ForcedLagrangian<1> for Oscillator {
+    /// #     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+    /// #         (v[0] * v[0] - q[0] * q[0]) * 0.5
+    /// #     }
+    /// # }
+    /// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.1)?
+    ///     .tolerances(1e-8, 1e-8)?
+    ///     .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+    ///     .map_err(|f| f.error)?;
+    /// let end = run.last().unwrap();
+    /// assert!((end.q[0] - 10f64.cos()).abs() < 1e-6);
+    /// // Dense output between the steps.
+    /// let mid = run.at(5.0).unwrap();
+    /// assert!((mid.q[0] - 5f64.cos()).abs() < 1e-6);
+    /// # Ok::<(), forced_vi::Error>(())
+    /// ```
+    pub fn tolerances(self, rtol: f64, atol: f64) -> Result<Self, Error> {
+        Ok(self.tolerance(Tolerance::scalar(rtol, atol)?))
+    }
+
+    /// Makes the run adaptive with tolerances per coordinate (see [`Self::tolerances`]).
+    #[must_use]
+    pub fn tolerance(mut self, tolerance: Tolerance<N>) -> Self {
+        self.tolerance = Some(tolerance);
         self
     }
 
@@ -188,6 +231,45 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         Ok(stepper.stats())
     }
 
+    /// Runs to the last of `times` and returns the dense output at each of them (see
+    /// [`DenseState`]), so that the step grid, fixed or adaptive, is free of the output grid.
+    /// Only the last step is held, so memory grows with the samples, not the steps. The
+    /// times must be finite, non-negative and non-decreasing.
+    pub fn sample(
+        &self,
+        init: InitialState<N>,
+        times: &[f64],
+    ) -> Result<Vec<DenseState<N>>, SampleFailure<N>> {
+        let fail = |error, samples| SampleFailure { error, samples };
+        let ordered = times.windows(2).all(|w| w[0] <= w[1]);
+        if let Some(&t) = times.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+            return Err(fail(Error::InvalidFinalTime { t_final: t }, Vec::new()));
+        }
+        if !ordered {
+            return Err(fail(Error::UnorderedTimes, Vec::new()));
+        }
+        let t_final = times.last().copied().unwrap_or(0.0);
+        let mut stepper = self
+            .stepper(init, t_final)
+            .map_err(|e| fail(e, Vec::new()))?;
+        let mut out = Vec::with_capacity(times.len());
+        let mut prev: Option<StepRecord<N>> = None;
+        for rec in stepper.by_ref() {
+            let rec = match rec {
+                Ok(r) => r,
+                Err(e) => return Err(fail(e, out)),
+            };
+            while let Some(&t) = times.get(out.len()).filter(|&&t| t <= rec.t) {
+                out.push(match &prev {
+                    Some(a) => hermite(a, &rec, t),
+                    None => hermite(&rec, &rec, t),
+                });
+            }
+            prev = Some(rec);
+        }
+        Ok(out)
+    }
+
     /// Runs to `t_final` and collects every record. On failure the records computed so far
     /// come back with the error.
     pub fn run(&self, init: InitialState<N>, t_final: f64) -> Result<Trajectory<N>, RunFailure<N>> {
@@ -201,10 +283,16 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
                 })
             }
         };
-        // All records are reserved up front, so that a run that cannot hold them fails
-        // before its first step rather than aborting in the middle.
+        // A fixed-step run reserves all its records up front, so that a run that cannot
+        // hold them fails before its first step rather than aborting in the middle; an
+        // adaptive one grows its storage fallibly.
         let records = stepper.total_steps().saturating_add(1);
-        if traj.records.try_reserve_exact(records).is_err() {
+        let reserve = if self.tolerance.is_some() {
+            records.min(1024)
+        } else {
+            records
+        };
+        if traj.records.try_reserve_exact(reserve).is_err() {
             return Err(RunFailure {
                 error: Error::TooManyRecords { records },
                 trajectory: traj,
@@ -212,7 +300,19 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         }
         for rec in stepper.by_ref() {
             match rec {
-                Ok(r) => traj.records.push(r),
+                Ok(r) => {
+                    if traj.records.len() == traj.records.capacity()
+                        && traj.records.try_reserve(traj.records.len()).is_err()
+                    {
+                        traj.stats = stepper.stats();
+                        let records = traj.records.len() * 2;
+                        return Err(RunFailure {
+                            error: Error::TooManyRecords { records },
+                            trajectory: traj,
+                        });
+                    }
+                    traj.records.push(r)
+                }
                 Err(error) => {
                     traj.stats = stepper.stats();
                     return Err(RunFailure {

@@ -49,9 +49,11 @@
 //! | initial data, the velocity solve `L_v(q, v) = p`, mass-matrix checks | [`initial`] |
 //! | the stepping loop: predictor, solve, update, subdivision, checks | [`stepper`] |
 //! | records, energy and energy balance (DESIGN §4), run totals, failures | [`trajectory`] |
+//! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
 //! | the integrator builder and its run methods | [`integrator`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
 
+pub mod control;
 pub mod doubled;
 mod error;
 pub mod initial;
@@ -64,6 +66,7 @@ mod step_equations;
 pub mod stepper;
 pub mod trajectory;
 
+pub use control::Tolerance;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
 pub use integrator::{Integrator, StepOptions, MAX_KERNEL_STACK};
@@ -72,7 +75,9 @@ pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
 pub use stepper::Stepper;
-pub use trajectory::{RunFailure, RunStats, StepRecord, StreamFailure, Trajectory};
+pub use trajectory::{
+    DenseState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure, Trajectory,
+};
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.
 ///
@@ -83,7 +88,7 @@ pub use forced_vi_macros::forced_lagrangian;
 pub mod prelude {
     pub use crate::{
         forced_lagrangian, ForcedLagrangian, InitialState, Integrator, Scalar, Scheme, SchemeId,
-        StepRecord, Trajectory,
+        StepRecord, Tolerance, Trajectory,
     };
 }
 

@@ -3,6 +3,7 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
+use crate::control::{Controller, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::initial::{mass_check, mass_factor, solve_velocity, InitialState, MIN_MASS_RCOND};
 use crate::integrator::{Integrator, StepOptions};
@@ -88,6 +89,12 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Sign of the mass matrix's determinant at the start: a step that changes it has
     /// crossed a singular mass.
     mass_sign: f64,
+    /// The current time.
+    t: f64,
+    /// Adaptive runs: the tolerances, the controller and the next step to try.
+    tolerance: Option<Tolerance<N>>,
+    controller: Controller,
+    h_next: f64,
     stats: RunStats,
     started: bool,
     done: bool,
@@ -116,7 +123,11 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             .validate()
             .map_err(|(field, value)| Error::InvalidNewtonOptions { field, value })?;
         let h = integ.h;
-        let n_steps = step_count(t_final, h, integ.options.max_steps)?;
+        let n_steps = match integ.tolerance {
+            // Adaptive: the count is not known; the cap is checked as the run goes.
+            Some(_) => step_count(t_final, h, usize::MAX)?,
+            None => step_count(t_final, h, integ.options.max_steps)?,
+        };
         let check = |what: &'static str, x: &[f64; N]| match x.iter().position(|c| !c.is_finite()) {
             Some(index) => Err(Error::NonFiniteInitialData { what, index }),
             None => Ok(()),
@@ -187,13 +198,18 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             h_prev: h,
             scale_f: g0.fq.amax(),
             mass_sign,
+            t: 0.0,
+            tolerance: integ.tolerance,
+            controller: Controller::new(scheme.order()),
+            h_next: h,
             stats: RunStats::default(),
             started: false,
             done: false,
         })
     }
 
-    /// Number of steps the run will take.
+    /// Number of steps the run will take (for an adaptive run, the number it would take
+    /// with its first step size).
     pub fn total_steps(&self) -> usize {
         self.n_steps
     }
@@ -216,7 +232,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let e = energy(self.prob.model, &q, &v, &p).unwrap_or(f64::NAN);
         StepRecord {
             step: self.k,
-            t: self.time_of(self.k),
+            t: self.t,
             q,
             p,
             v,
@@ -386,33 +402,13 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             }
             match outcome {
                 Ok(res) => {
-                    self.k += 1;
-                    let t = self.time_of(self.k);
-                    self.v = solve_velocity(
-                        self.prob.model,
-                        &self.q.sum,
-                        &self.p.sum,
-                        self.v,
-                        self.k,
-                        t,
-                    )?;
                     if parts > 1 {
                         self.stats.subdivided_steps += 1;
                         // The predictor's polynomial covered a substep; start afresh.
                         self.has_prev = false;
                     }
-                    self.stats.steps += 1;
-                    self.stats.newton_iterations += iters;
-                    self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
-                    let rec = self.record(iters, res, parts);
-                    if let Some(quantity) = non_finite_field(&rec) {
-                        return Err(Error::Overflow {
-                            step: self.k,
-                            t,
-                            quantity,
-                        });
-                    }
-                    return Ok(rec);
+                    self.t = self.time_of(self.k + 1);
+                    return self.finish_step(iters, res, parts);
                 }
                 Err(f) => {
                     last_failure = Some(f);
@@ -423,13 +419,45 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             }
         }
         self.restore(&snap);
+        Err(self.failure_error(
+            last_failure.unwrap_or(StepFailure::Newton(NewtonFailure::NonFinite)),
+            t0,
+        ))
+    }
+
+    /// Completes an accepted step that ends at `self.t`: the velocity solve, the totals and
+    /// the record, every field of which must be finite.
+    fn finish_step(
+        &mut self,
+        iters: usize,
+        residual: f64,
+        substeps: usize,
+    ) -> Result<StepRecord<N>, Error> {
+        self.k += 1;
+        let t = self.t;
+        self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
+        self.stats.steps += 1;
+        self.stats.newton_iterations += iters;
+        self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
+        let rec = self.record(iters, residual, substeps);
+        if let Some(quantity) = non_finite_field(&rec) {
+            return Err(Error::Overflow {
+                step: self.k,
+                t,
+                quantity,
+            });
+        }
+        Ok(rec)
+    }
+
+    /// The error for a step from `t0` that could not be taken.
+    fn failure_error(&self, failure: StepFailure, t0: f64) -> Error {
         let step = self.k + 1;
-        let failure = match last_failure {
-            Some(StepFailure::SingularMass { rcond }) => {
-                return Err(Error::SingularMassMatrix { step, t: t0, rcond })
+        let failure = match failure {
+            StepFailure::SingularMass { rcond } => {
+                return Error::SingularMassMatrix { step, t: t0, rcond }
             }
-            Some(StepFailure::Newton(f)) => f,
-            None => NewtonFailure::NonFinite,
+            StepFailure::Newton(f) => f,
         };
         let residual = match failure {
             NewtonFailure::MaxIterations { residual }
@@ -439,14 +467,97 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         };
         if failure == NewtonFailure::NonFinite {
             let size = self.q.sum.amax().max(self.p.sum.amax()).max(self.v.amax());
-            return Err(non_finite(size, step, t0, "state"));
+            return non_finite(size, step, t0, "state");
         }
-        Err(Error::NewtonFailed {
+        Error::NewtonFailed {
             step,
             t: t0,
             residual,
             failure,
-        })
+        }
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// One adaptive step from `t`: step doubling, accepted when the error norm is at most
+    /// one, retried with a smaller step otherwise (see [`crate::control`]).
+    fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<StepRecord<N>, Error> {
+        let t0 = self.t;
+        let snap = self.snapshot();
+        let span = self.t_final;
+        let h_min = 16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs());
+        let mut iters = 0;
+        let mut last_failure = None;
+        loop {
+            let remaining = self.t_final - t0;
+            let mut h = self.h_next.min(remaining);
+            // No sliver of a step at the end.
+            let last = h >= remaining * (1.0 - 1e-10);
+            if last {
+                h = remaining;
+            }
+            if h < h_min || !h.is_finite() {
+                return Err(match last_failure {
+                    Some(f) => self.failure_error(f, t0),
+                    None => Error::StepSizeTooSmall { t: t0, h },
+                });
+            }
+            if self.stats.steps >= self.options.max_steps {
+                return Err(Error::MaxStepsReached {
+                    t: t0,
+                    steps: self.options.max_steps,
+                });
+            }
+            match self.doubled(h, &snap, &mut iters) {
+                Ok((res, (q1, p1))) => {
+                    let err = tol.error_norm(
+                        self.prob.scheme.order(),
+                        span / h,
+                        (&q1, &p1),
+                        (&self.q.sum, &self.p.sum),
+                    );
+                    if err <= 1.0 {
+                        self.h_next = self.controller.accept(h, err);
+                        self.t = if last { self.t_final } else { t0 + h };
+                        return self.finish_step(iters, res, 2);
+                    }
+                    self.h_next = self.controller.reject(h, err);
+                }
+                Err(f) => {
+                    last_failure = Some(f);
+                    self.h_next = self.controller.reject(h, f64::INFINITY);
+                }
+            }
+            self.stats.rejected_steps += 1;
+            self.restore(&snap);
+        }
+    }
+
+    /// A step of `h` and two of `h/2` from the same state; leaves the state after the
+    /// halves and returns their last residual and the whole step's `(q, p)`.
+    #[allow(clippy::type_complexity)]
+    fn doubled(
+        &mut self,
+        h: f64,
+        snap: &Snapshot<N>,
+        iters: &mut usize,
+    ) -> Result<(f64, (SVector<f64, N>, SVector<f64, N>)), StepFailure> {
+        let mut run = |this: &mut Self, h: f64| match this.advance(h) {
+            Ok((it, res)) => {
+                *iters += it;
+                Ok(res)
+            }
+            Err(f) => {
+                *iters += this.newton.last_iterations();
+                Err(f)
+            }
+        };
+        run(self, h)?;
+        let whole = (self.q.sum, self.p.sum);
+        self.restore(snap);
+        run(self, 0.5 * h)?;
+        let res = run(self, 0.5 * h)?;
+        Ok((res, whole))
     }
 }
 
@@ -461,11 +572,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
             self.started = true;
             return Some(Ok(self.record(0, 0.0, 1)));
         }
-        if self.k >= self.n_steps {
+        if self.k >= self.n_steps && self.tolerance.is_none() {
             self.done = true;
             return None;
         }
-        let out = with_kernel_stack::<M, N, _>(|| self.step());
+        let out = match self.tolerance {
+            Some(tol) if self.t < self.t_final => {
+                with_kernel_stack::<M, N, _>(|| self.step_adaptive(&tol))
+            }
+            Some(_) => {
+                self.done = true;
+                return None;
+            }
+            None => with_kernel_stack::<M, N, _>(|| self.step()),
+        };
         if out.is_err() {
             self.done = true;
         }

@@ -44,6 +44,8 @@ pub struct RunStats {
     pub subdivided_steps: usize,
     /// Largest Newton iteration count of one step.
     pub max_newton_iterations: usize,
+    /// Adaptive runs: step attempts rejected by the error test or by a failed solve.
+    pub rejected_steps: usize,
 }
 
 /// A finished run: every record, initial state first.
@@ -60,6 +62,94 @@ impl<const N: usize> Trajectory<N> {
     pub fn last(&self) -> Option<&StepRecord<N>> {
         self.records.last()
     }
+
+    /// Dense output at `t` (see [`DenseState`]); `None` outside the run's time span.
+    pub fn at(&self, t: f64) -> Option<DenseState<N>> {
+        let recs = &self.records;
+        let (first, last) = (recs.first()?, recs.last()?);
+        if !(t >= first.t && t <= last.t) {
+            return None;
+        }
+        // The first record at or after t.
+        let k = recs.partition_point(|r| r.t < t);
+        match k {
+            0 => Some(DenseState::from_record(first)),
+            _ => recs.get(k).map(|b| hermite(&recs[k - 1], b, t)),
+        }
+    }
+
+    /// Dense output at each of `times`, in order; `None` if one lies outside the run.
+    pub fn sample(&self, times: &[f64]) -> Option<Vec<DenseState<N>>> {
+        times.iter().map(|&t| self.at(t)).collect()
+    }
+}
+
+/// A state between the steps of a run, from its dense output.
+///
+/// The dense output is the cubic Hermite interpolant of the positions and velocities at
+/// the two ends of the step: `q` is accurate to `O(h^min(4, p))` and `v` to
+/// `O(h^min(3, p))` for a scheme of order `p` (measured in the `dense_` tests). The
+/// Galerkin path itself is only `O(h^s)` between its control points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DenseState<const N: usize> {
+    /// The time.
+    pub t: f64,
+    /// Positions.
+    pub q: SVector<f64, N>,
+    /// Velocities.
+    pub v: SVector<f64, N>,
+}
+
+impl<const N: usize> DenseState<N> {
+    fn from_record(r: &StepRecord<N>) -> Self {
+        DenseState {
+            t: r.t,
+            q: r.q,
+            v: r.v,
+        }
+    }
+}
+
+/// The cubic Hermite interpolant between two records at `t ∈ [a.t, b.t]`.
+pub(crate) fn hermite<const N: usize>(
+    a: &StepRecord<N>,
+    b: &StepRecord<N>,
+    t: f64,
+) -> DenseState<N> {
+    let h = b.t - a.t;
+    if h <= 0.0 || t >= b.t {
+        return DenseState::from_record(b);
+    }
+    let s = (t - a.t) / h;
+    let (s2, s3) = (s * s, s * s * s);
+    let (h00, h10, h01, h11) = (
+        2.0 * s3 - 3.0 * s2 + 1.0,
+        s3 - 2.0 * s2 + s,
+        3.0 * s2 - 2.0 * s3,
+        s3 - s2,
+    );
+    let (d00, d10, d01, d11) = (
+        6.0 * s2 - 6.0 * s,
+        3.0 * s2 - 4.0 * s + 1.0,
+        6.0 * s - 6.0 * s2,
+        3.0 * s2 - 2.0 * s,
+    );
+    DenseState {
+        t,
+        q: a.q * h00 + a.v * (h10 * h) + b.q * h01 + b.v * (h11 * h),
+        v: (a.q * d00 + b.q * d01) / h + a.v * d10 + b.v * d11,
+    }
+}
+
+/// A sampled run that stopped early: the error and the samples before it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{error} ({} samples kept)", samples.len())]
+pub struct SampleFailure<const N: usize> {
+    /// What stopped the run.
+    #[source]
+    pub error: Error,
+    /// The samples at the requested times before the failure.
+    pub samples: Vec<DenseState<N>>,
 }
 
 /// A run that stopped early: the error and everything computed before it.

@@ -1,0 +1,247 @@
+//! Error control: the step-doubling estimate, tolerance proportionality, dense output and
+//! the typed errors of adaptive runs. `cargo test --release --test adaptive`.
+
+use forced_vi::prelude::*;
+use forced_vi::Error;
+use forced_vi_scenes::models::{CoupledVanDerPol, DampedOscillator};
+use forced_vi_scenes::scenes;
+
+/// The least-squares slope of log y against log x.
+fn fit(xs: &[f64], ys: &[f64]) -> f64 {
+    let pts: Vec<(f64, f64)> = xs.iter().copied().zip(ys.iter().copied()).collect();
+    forced_vi_scenes::report::orders::slope(&pts).unwrap_or(f64::NAN)
+}
+
+const PAPER_Q0: [f64; 2] = [-0.5, -0.25];
+const PAPER_V0: [f64; 2] = [0.0, 4.0];
+
+/// `(q, p)` after fixed steps of `h` to `t` from the paper's initial state.
+fn fixed(scheme: &Scheme, h: f64, t: f64) -> [f64; 4] {
+    let run = Integrator::new(&CoupledVanDerPol::PAPER, scheme.clone(), h)
+        .unwrap()
+        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), t)
+        .unwrap();
+    let end = run.last().unwrap();
+    [end.q[0], end.q[1], end.p[0], end.p[1]]
+}
+
+fn max_diff(a: &[f64; 4], b: &[f64; 4]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The estimate `(y₂ − y₁) / (2^p − 1)` of the local error of the two-half-step solution
+/// `y₂`, against that solution's true local error (the flow from the same state, by lobatto5
+/// with 256 substeps). It scales at order `p + 1` and stays within [0.1, 10] of the truth.
+#[test]
+fn adaptive_estimate_tracks_the_true_local_error() {
+    for s in 2..=5 {
+        let scheme = Scheme::lobatto(s).unwrap();
+        let p = scheme.order() as i32;
+        let fine = Scheme::lobatto(5).unwrap();
+        let (mut hs, mut ests, mut truths) = (Vec::new(), Vec::new(), Vec::new());
+        let mut h: f64 = 0.4;
+        // Two decades of h, or as far as the local error stays above round-off.
+        while h > 0.4e-2 {
+            let y1 = fixed(&scheme, h, h);
+            let y2 = fixed(&scheme, 0.5 * h, h);
+            let exact = fixed(&fine, h / 256.0, h);
+            let est = max_diff(&y2, &y1) / (2f64.powi(p) - 1.0);
+            let truth = max_diff(&y2, &exact);
+            if truth < 1e-13 {
+                break;
+            }
+            let ratio = est / truth;
+            eprintln!("lobatto{s} h={h:.4} est={est:.3e} true={truth:.3e} ratio={ratio:.3}");
+            assert!(
+                (0.1..=10.0).contains(&ratio),
+                "lobatto{s} h={h}: estimate {est:e}, true {truth:e}"
+            );
+            hs.push(h);
+            ests.push(est);
+            truths.push(truth);
+            h /= 2.0;
+        }
+        assert!(hs.len() >= 3, "lobatto{s}: too few points above round-off");
+        let (k, k_true) = (fit(&hs, &ests), fit(&hs, &truths));
+        eprintln!(
+            "lobatto{s}: estimate order {k:.2}, true local error {k_true:.2}, h = {}..{}",
+            hs[0],
+            hs[hs.len() - 1]
+        );
+        // It scales as the error it estimates, at order p + 1 or above (lobatto4's local
+        // error on this model is dominated by its h^{p+2} term at these h).
+        assert!((k - k_true).abs() <= 0.3, "lobatto{s}: {k} vs {k_true}");
+        // lobatto5's local error leaves round-off only above h = 0.1: its window is less
+        // than a decade and still pre-asymptotic (measured 8.6 against 9).
+        let slack = if s == 5 { 0.5 } else { 0.3 };
+        assert!(k >= (p + 1) as f64 - slack, "lobatto{s}: order {k}");
+    }
+}
+
+/// On every report scene, the final error in q stays within 100·tol for rtol = atol from
+/// 1e-3 to 1e-12, and falls with the tolerance at a slope between 0.7 and 1.3.
+#[test]
+fn adaptive_tolerance_proportionality_on_the_report_scenes() {
+    let tols: Vec<f64> = (3..=12).map(|k| 10f64.powi(-k)).collect();
+    for scene in scenes::all().unwrap() {
+        let reference = scene.reference(0).unwrap().clone();
+        for s in 2..=5 {
+            let scheme = Scheme::lobatto(s).unwrap();
+            let (mut ts, mut errs) = (Vec::new(), Vec::new());
+            // lobatto2 needs 10⁷ steps at 1e-12; the test stops at 1e-9 (the report sweeps on).
+            for &tol in tols.iter().filter(|&&t| s > 2 || t >= 1e-9) {
+                let out = scene
+                    .run_adaptive(&scheme, tol, 0)
+                    .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
+                let err = out
+                    .end
+                    .q
+                    .iter()
+                    .zip(&reference.q)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                eprintln!(
+                    "{} lobatto{s} tol {tol:.0e}: err {err:.2e} steps {}",
+                    scene.name(),
+                    out.steps
+                );
+                assert!(
+                    err <= 100.0 * tol,
+                    "{} lobatto{s} tol {tol:e}: error {err:e}",
+                    scene.name()
+                );
+                // The fit uses the errors above the references' own accuracy, from runs of
+                // at least 4 steps: with 1 to 3 steps over the whole run, the error is set by
+                // the run's length rather than by the tolerance (the full-sweep slope of the
+                // ensemble's lobatto5 is 1.30; the closing note gives both).
+                if err > 1e-12 && out.steps >= 4 {
+                    ts.push(tol);
+                    errs.push(err);
+                }
+            }
+            let k = fit(&ts, &errs);
+            eprintln!("{} lobatto{s}: slope {k:.2}", scene.name());
+            assert!(
+                (0.7..=1.3).contains(&k),
+                "{} lobatto{s}: slope {k}",
+                scene.name()
+            );
+        }
+    }
+}
+
+/// The dense output (cubic Hermite) between steps converges at order min(4, p) in q.
+#[test]
+fn dense_output_order() {
+    let model = DampedOscillator::DEFAULT;
+    let (q0, v0) = ([1.0, 0.0], [0.0, 0.5]);
+    let fine = Integrator::new(&model, Scheme::lobatto(5).unwrap(), 1e-3)
+        .unwrap()
+        .run(InitialState::from_velocity(q0, v0), 2.0)
+        .unwrap();
+    for (s, expected) in [(2, 2.0), (3, 4.0), (5, 4.0)] {
+        let (mut hs, mut errs) = (Vec::new(), Vec::new());
+        for h in [0.2, 0.1, 0.05, 0.025] {
+            let run = Integrator::new(&model, Scheme::lobatto(s).unwrap(), h)
+                .unwrap()
+                .run(InitialState::from_velocity(q0, v0), 2.0)
+                .unwrap();
+            // Times inside the steps, off the fine run's grid too.
+            let times: Vec<f64> = (0..40).map(|k| 0.0137 + 0.049 * k as f64).collect();
+            let coarse = run.sample(&times).unwrap();
+            let exact = fine.sample(&times).unwrap();
+            let err = coarse
+                .iter()
+                .zip(&exact)
+                .map(|(a, b)| (a.q - b.q).amax())
+                .fold(0.0, f64::max);
+            hs.push(h);
+            errs.push(err);
+        }
+        let k = fit(&hs, &errs);
+        eprintln!("lobatto{s}: dense output order {k:.2} ({errs:?})");
+        assert!((k - expected).abs() <= 0.4, "lobatto{s}: order {k}");
+    }
+}
+
+#[test]
+fn adaptive_output_at_requested_times() {
+    let integ = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(4).unwrap(), 0.01)
+        .unwrap()
+        .tolerances(1e-10, 1e-10)
+        .unwrap();
+    let times = [0.0, 0.1, 0.25, 0.5, 0.75, 1.0];
+    let samples = integ
+        .sample(InitialState::from_velocity(PAPER_Q0, PAPER_V0), &times)
+        .unwrap();
+    assert_eq!(samples.len(), times.len());
+    let end = fixed(&Scheme::lobatto(5).unwrap(), 1e-3, 1.0);
+    for (s, t) in samples.iter().zip(times) {
+        assert_eq!(s.t, t);
+    }
+    let last = samples.last().unwrap();
+    assert!((last.q[0] - end[0]).abs() < 1e-8 && (last.q[1] - end[1]).abs() < 1e-8);
+    // Unordered or negative times are typed errors.
+    let bad = integ.sample(InitialState::from_velocity(PAPER_Q0, PAPER_V0), &[0.5, 0.2]);
+    assert!(matches!(bad.unwrap_err().error, Error::UnorderedTimes));
+}
+
+#[test]
+fn adaptive_runs_end_on_time_with_a_small_energy_balance() {
+    for tol in [1e-4, 1e-8] {
+        let run = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.1)
+            .unwrap()
+            .tolerances(tol, tol)
+            .unwrap()
+            .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 10.0)
+            .unwrap();
+        let end = run.last().unwrap();
+        assert_eq!(end.t, 10.0);
+        assert!(run.records.windows(2).all(|w| w[1].t > w[0].t));
+        assert!(
+            end.energy_balance.abs() < 100.0 * tol,
+            "tol {tol:e}: {}",
+            end.energy_balance
+        );
+    }
+}
+
+#[test]
+fn adaptive_typed_errors_keep_the_steps_before_them() {
+    let integ = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.1)
+        .unwrap()
+        .tolerances(1e-12, 1e-12)
+        .unwrap()
+        .max_steps(20);
+    let f = integ
+        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 10.0)
+        .unwrap_err();
+    assert!(
+        matches!(f.error, Error::MaxStepsReached { steps: 20, .. }),
+        "{}",
+        f.error
+    );
+    assert_eq!(f.trajectory.records.len(), 21);
+    // A tolerance below what f64 can deliver runs into the step-size floor.
+    let f = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(2).unwrap(), 0.1)
+        .unwrap()
+        .tolerances(0.0, 1e-300)
+        .unwrap()
+        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 1.0)
+        .unwrap_err();
+    assert!(
+        matches!(f.error, Error::StepSizeTooSmall { .. }),
+        "{}",
+        f.error
+    );
+    for (r, a) in [(-1.0, 1e-6), (f64::NAN, 1e-6), (0.0, 0.0)] {
+        let e = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(2).unwrap(), 0.1)
+            .unwrap()
+            .tolerances(r, a)
+            .unwrap_err();
+        assert!(matches!(e, Error::InvalidTolerance { .. }));
+    }
+}
