@@ -441,10 +441,18 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
         let rec = self.record(iters, residual, substeps);
         if let Some(quantity) = non_finite_field(&rec) {
-            return Err(Error::Overflow {
-                step: self.k,
-                t,
-                quantity,
+            // A NaN is the model's (a Lagrangian that is NaN at a representable state); an
+            // infinity from a huge state is an overflow.
+            let size = rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
+            let nan = [rec.energy, rec.energy_balance].iter().any(|x| x.is_nan());
+            return Err(if nan && size.is_finite() && size < f64::MAX.sqrt() {
+                Error::NonFiniteModel { step: self.k, t }
+            } else {
+                Error::Overflow {
+                    step: self.k,
+                    t,
+                    quantity,
+                }
             });
         }
         Ok(rec)
