@@ -4,6 +4,7 @@
 use std::collections::{BTreeSet, HashMap};
 
 use quote::quote;
+use syn::ext::IdentExt;
 use syn::{Expr, Ident, Type};
 
 use crate::ast::{Coord, Force, Model};
@@ -336,25 +337,40 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
             "`coordinates()` is empty: name at least one coordinate",
         );
     }
-    let mut seen: HashMap<String, &Ident> = HashMap::new();
+    let mut seen: BTreeSet<String> = BTreeSet::new();
     let mut groups = Vec::new();
     let mut offset: usize = 0;
     for c in coords {
-        let name = c.name.to_string();
-        if name.starts_with("r#") {
+        let unraw;
+        let c = if c.name.to_string().starts_with("r#") {
             cx.error_spanned_by(
                 &c.name,
                 format!(
-                    "a coordinate cannot be a raw identifier (`{name}`): its velocity is named by appending `_dot`; choose a plain name"
+                    "a coordinate cannot be a raw identifier (`{}`): its velocity is named by appending `_dot`; choose a plain name",
+                    c.name
                 ),
             );
-            continue;
-        }
+            // Registered under its plain name, so that uses of `x` and `x_dot` resolve and
+            // the refusal is the only error (a keyword such as `r#fn` has no plain name).
+            let plain = c.name.unraw().to_string();
+            if syn::parse_str::<Ident>(&plain).is_err() {
+                continue;
+            }
+            unraw = Coord {
+                name: Ident::new(&plain, c.name.span()),
+                velocity: c.velocity.clone(),
+                ty: c.ty.clone(),
+            };
+            &unraw
+        } else {
+            c
+        };
+        let name = c.name.to_string();
         if reserved(&name) {
             cx.error_spanned_by(&c.name, reserved_message(&name));
             continue;
         }
-        if seen.contains_key(&name) {
+        if seen.contains(&name) {
             cx.error_spanned_by(&c.name, format!("duplicate coordinate `{name}`"));
             continue;
         }
@@ -383,7 +399,7 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
                 ),
             );
         }
-        seen.insert(name, &c.name);
+        seen.insert(name);
         let (len, array) = match &c.ty {
             None => (Some(Len::Lit(1)), false),
             Some(ty) => (array_len(cx, c, ty, const_params), true),

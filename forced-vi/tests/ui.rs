@@ -1,0 +1,30 @@
+//! Compile-time checks of `#[forced_lagrangian]`: every `tests/ui/<mistake>.rs` (at the
+//! workspace root) must fail to compile with the committed `.stderr`, and every
+//! `tests/ui/pass-*.rs` must compile (under `#![deny(warnings)]`). Bless new output with
+//! `TRYBUILD=overwrite`.
+//!
+//! The runner lives in `forced-vi` rather than the root package so that trybuild builds the
+//! cases against `forced-vi`'s dependencies only, not the report's (diffsol, plotters, ...).
+
+#[test]
+fn ui() {
+    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/ui"));
+    let t = trybuild::TestCases::new();
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .expect("tests/ui exists")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "rs"))
+        .collect();
+    files.sort();
+    for path in files {
+        let pass = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("pass-"));
+        if pass {
+            t.pass(&path);
+        } else {
+            t.compile_fail(&path);
+        }
+    }
+}
