@@ -9,7 +9,8 @@ use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
 use crate::stepper::Stepper;
 use crate::trajectory::{
-    hermite, DenseState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure, Trajectory,
+    hermite, DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord,
+    StreamFailure, Trajectory,
 };
 
 /// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
@@ -229,6 +230,37 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             }
         }
         Ok(stepper.stats())
+    }
+
+    /// Runs to `t_final` and returns the final state alone: the cheapest run. No record is
+    /// kept, and the per-step diagnostics are left out (the velocity solve, the energy and
+    /// the work of the force); the final velocity and energy are computed once, at the end.
+    /// Each step is solved and checked as in [`Self::run`].
+    pub fn final_state(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<FinalState<N>, StreamFailure> {
+        let fail = |error, stats| StreamFailure { error, stats };
+        let mut stepper = self
+            .stepper(init, t_final)
+            .map_err(|e| fail(e, RunStats::default()))?;
+        stepper.set_lean(true);
+        for rec in stepper.by_ref() {
+            if let Err(e) = rec {
+                return Err(fail(e, stepper.stats()));
+            }
+        }
+        let stats = stepper.stats();
+        let end = stepper.finish().map_err(|e| fail(e, stats))?;
+        Ok(FinalState {
+            t: end.t,
+            q: end.q,
+            p: end.p,
+            v: end.v,
+            energy: end.energy,
+            stats,
+        })
     }
 
     /// Runs to the last of `times` and returns the dense output at each of them (see

@@ -95,6 +95,8 @@ pub struct Stepper<'a, M, const N: usize> {
     tolerance: Option<Tolerance<N>>,
     controller: Controller,
     h_next: f64,
+    /// Final state only: no velocity solve, energy, work or record per step.
+    lean: bool,
     stats: RunStats,
     started: bool,
     done: bool,
@@ -202,6 +204,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             tolerance: integ.tolerance,
             controller: Controller::new(scheme.order()),
             h_next: h,
+            lean: false,
             stats: RunStats::default(),
             started: false,
             done: false,
@@ -241,6 +244,55 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             newton_iterations,
             residual,
             substeps,
+        }
+    }
+
+    /// A record of the state alone (lean runs): `v` is the step polynomial's end slope,
+    /// the energy fields are zero.
+    fn raw_record(
+        &self,
+        newton_iterations: usize,
+        residual: f64,
+        substeps: usize,
+    ) -> StepRecord<N> {
+        StepRecord {
+            step: self.k,
+            t: self.t,
+            q: self.q.sum,
+            p: self.p.sum,
+            v: self.v,
+            energy: 0.0,
+            energy_balance: 0.0,
+            newton_iterations,
+            residual,
+            substeps,
+        }
+    }
+
+    /// Leaves out the per-step diagnostics (velocity solve, energy, work, balance): the
+    /// iterator's records then hold the state alone until [`Stepper::finish`].
+    pub(crate) fn set_lean(&mut self, lean: bool) {
+        self.lean = lean;
+    }
+
+    /// The full record of the current state: the velocity solve and the energy. In a lean
+    /// run the work was not summed, so the balance is not known: it is reported as zero.
+    pub(crate) fn finish(&mut self) -> Result<StepRecord<N>, Error> {
+        let t = self.t;
+        if self.lean && self.k > 0 {
+            self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
+        }
+        let mut rec = self.record(0, 0.0, 1);
+        if self.lean {
+            rec.energy_balance = 0.0;
+        }
+        match non_finite_field(&rec) {
+            Some(quantity) => Err(Error::Overflow {
+                step: self.k,
+                t,
+                quantity,
+            }),
+            None => Ok(rec),
         }
     }
 
@@ -324,7 +376,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             let bi = sch.b()[i];
             dp.axpy(h * bi, &self.prob.grads[i].fq, 1.0);
             fmax = fmax.max(self.prob.grads[i].fq.amax());
-            if M::STRUCTURE.has_force {
+            if M::STRUCTURE.has_force && !self.lean {
                 let (x, v) = (self.prob.xs[i], self.prob.vs[i]);
                 let f = SVector::from(self.prob.model.force::<f64>(&x.into(), &v.into()));
                 dw += h * bi * f.dot(&v);
@@ -435,10 +487,15 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     ) -> Result<StepRecord<N>, Error> {
         self.k += 1;
         let t = self.t;
-        self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
         self.stats.steps += 1;
         self.stats.newton_iterations += iters;
         self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
+        if self.lean {
+            // The state only; the velocity, energy and balance are left out (and checked
+            // once at the end, `finish`).
+            return Ok(self.raw_record(iters, residual, substeps));
+        }
+        self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
         let rec = self.record(iters, residual, substeps);
         if let Some(quantity) = non_finite_field(&rec) {
             // A NaN is the model's (a Lagrangian that is NaN at a representable state); an

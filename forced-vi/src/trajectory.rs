@@ -84,6 +84,23 @@ impl<const N: usize> Trajectory<N> {
     }
 }
 
+/// The end of a run without per-step diagnostics ([`crate::Integrator::final_state`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FinalState<const N: usize> {
+    /// The final time.
+    pub t: f64,
+    /// Positions.
+    pub q: SVector<f64, N>,
+    /// Momenta.
+    pub p: SVector<f64, N>,
+    /// Velocities, solving `L_v(q, v) = p`.
+    pub v: SVector<f64, N>,
+    /// Energy `v · L_v − L`.
+    pub energy: f64,
+    /// Totals.
+    pub stats: RunStats,
+}
+
 /// A state between the steps of a run, from its dense output.
 ///
 /// The dense output is the cubic Hermite interpolant of the positions and velocities at
