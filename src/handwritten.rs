@@ -43,6 +43,7 @@ impl ForcedLagrangian<2> for HandCoupledVanDerPol {
         has_force: true,
         force_uses_velocity: true,
         constant_mass: true,
+        uses_time: false,
     };
 
     fn coordinate_names(&self) -> [&'static str; 2] {

@@ -7,6 +7,7 @@
 //! model's structure.
 
 use forced_vi::prelude::*;
+use forced_vi::Structure;
 
 /// Two coupled van der Pol oscillators, the paper's numerical test (§5 of the paper).
 ///
@@ -251,4 +252,97 @@ impl<const N: usize> SpringChain<N> {
         beta: 1.0,
         c: 1.0,
     };
+}
+
+/// A driven Duffing oscillator, `ẍ + δẋ + αx + βx³ = γ cos ωt` (issue 13), written by hand
+/// with the time-dependent trait methods: `L = ½ẋ² − ½αx² − ¼βx⁴`,
+/// `F(t, x, ẋ) = −δẋ + γ cos ωt`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrivenDuffing {
+    /// Damping δ.
+    pub delta: f64,
+    /// Linear stiffness α.
+    pub alpha: f64,
+    /// Cubic stiffness β.
+    pub beta: f64,
+    /// Drive amplitude γ.
+    pub gamma: f64,
+    /// Drive frequency ω.
+    pub omega: f64,
+}
+
+impl DrivenDuffing {
+    /// The chaotic regime `(δ, α, β, γ, ω) = (0.3, −1, 1, 0.5, 1.2)`.
+    pub const CHAOTIC: DrivenDuffing = DrivenDuffing {
+        delta: 0.3,
+        alpha: -1.0,
+        beta: 1.0,
+        gamma: 0.5,
+        omega: 1.2,
+    };
+}
+
+impl ForcedLagrangian<1> for DrivenDuffing {
+    const STRUCTURE: Structure = Structure::GENERAL_DRIVEN;
+
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        let x = q[0];
+        v[0] * v[0] * 0.5 - x * x * (0.5 * self.alpha) - x.powi(4) * (0.25 * self.beta)
+    }
+    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        self.force_at(D::from(0.0), q, v)
+    }
+    fn force_at<D: Scalar>(&self, t: D, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * self.delta + (t * self.omega).cos() * self.gamma]
+    }
+}
+
+/// Kapitza's pendulum: a pendulum whose pivot moves vertically, `y_s(t) = a cos Ωt`, with
+/// joint friction (issue 13). With `θ` from the downward vertical,
+/// `L(t, θ, θ̇) = ½m(l²θ̇² + 2l sin θ θ̇ ẏ_s + ẏ_s²) − mg(y_s − l cos θ)`, `F = −cθ̇`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KapitzaPendulum {
+    /// Mass.
+    pub m: f64,
+    /// Length.
+    pub l: f64,
+    /// Gravity.
+    pub g: f64,
+    /// Pivot amplitude a.
+    pub a: f64,
+    /// Pivot frequency Ω.
+    pub big_omega: f64,
+    /// Joint friction c.
+    pub c: f64,
+}
+
+impl KapitzaPendulum {
+    /// A fast drive that holds the pendulum upright: `a²Ω² = 25 > 2gl`.
+    pub const UPRIGHT: KapitzaPendulum = KapitzaPendulum {
+        m: 1.0,
+        l: 1.0,
+        g: 9.81,
+        a: 0.1,
+        big_omega: 50.0,
+        c: 0.1,
+    };
+}
+
+impl ForcedLagrangian<1> for KapitzaPendulum {
+    const STRUCTURE: Structure = Structure::GENERAL_DRIVEN;
+
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        self.lagrangian_at(D::from(0.0), q, v)
+    }
+    fn lagrangian_at<D: Scalar>(&self, t: D, q: &[D; 1], v: &[D; 1]) -> D {
+        let (th, w) = (q[0], v[0]);
+        let phase = t * self.big_omega;
+        let ys = phase.cos() * self.a;
+        let yd = -phase.sin() * (self.a * self.big_omega);
+        (w * w * (self.l * self.l) + th.sin() * w * yd * (2.0 * self.l) + yd * yd) * (0.5 * self.m)
+            - (ys - th.cos() * self.l) * (self.m * self.g)
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * self.c]
+    }
 }

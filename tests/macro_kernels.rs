@@ -157,7 +157,8 @@ fn coupled_van_der_pol() {
         Structure {
             has_force: true,
             force_uses_velocity: true,
-            constant_mass: true
+            constant_mass: true,
+            uses_time: false,
         }
     );
     let blocks = check_model("CoupledVanDerPol", &m, 3.0, 0.0);

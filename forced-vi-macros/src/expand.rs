@@ -199,6 +199,7 @@ pub fn generate(c: &Checked) -> TokenStream {
                 has_force: #has_force,
                 force_uses_velocity: #force_uses_velocity,
                 constant_mass: #constant_mass,
+                uses_time: false,
             };
             fn coordinate_names(&self) -> [&'static str; #n] {
                 #names

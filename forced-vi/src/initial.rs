@@ -88,7 +88,7 @@ pub(crate) fn mass_check<M: ForcedLagrangian<N>, const N: usize>(
     step: usize,
     t: f64,
 ) -> Result<f64, Error> {
-    let e = model.mass_matrix(q, v);
+    let e = model.mass_matrix_at(t, q, v);
     if !all_finite(&e) {
         return Err(Error::NonFiniteModel { step, t });
     }
@@ -118,12 +118,12 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
 ) -> Result<SVector<f64, N>, Error> {
     let singular = |rcond| Error::SingularMassMatrix { step, t, rcond };
     let residual_at = |v: &SVector<f64, N>| -> Option<SVector<f64, N>> {
-        let r = model.node_gradient(q, v).lv - p;
+        let r = model.node_gradient_at(t, q, v).lv - p;
         all_finite(&r).then_some(r)
     };
     let mut v = guess;
     if M::STRUCTURE.constant_mass {
-        let e = model.mass_matrix(q, &v);
+        let e = model.mass_matrix_at(t, q, &v);
         let r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
         let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
         v += dv;
@@ -135,7 +135,7 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     }
     let mut r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
     for _ in 0..60 {
-        let e = model.mass_matrix(q, &v);
+        let e = model.mass_matrix_at(t, q, &v);
         if !all_finite(&e) {
             return Err(Error::NonFiniteModel { step, t });
         }

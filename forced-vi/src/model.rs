@@ -23,6 +23,11 @@ pub struct Structure {
     pub force_uses_velocity: bool,
     /// The mass matrix `E = ∂²L/∂v²` is constant and `C = ∂²L/∂v∂q` is zero.
     pub constant_mass: bool,
+    /// The model depends on time explicitly: it overrides
+    /// [`ForcedLagrangian::lagrangian_at`] or [`ForcedLagrangian::force_at`]. When `false`,
+    /// the integrator calls the autonomous kernels and leaves out `∂L/∂t` (a model that
+    /// does use `t` under a `false` flag is refused by [`crate::Integrator`]'s first step).
+    pub uses_time: bool,
 }
 
 impl Structure {
@@ -31,6 +36,13 @@ impl Structure {
         has_force: true,
         force_uses_velocity: true,
         constant_mass: false,
+        uses_time: false,
+    };
+
+    /// [`Structure::GENERAL`] for a model that depends on time.
+    pub const GENERAL_DRIVEN: Structure = Structure {
+        uses_time: true,
+        ..Structure::GENERAL
     };
 }
 
@@ -106,6 +118,20 @@ pub trait ForcedLagrangian<const N: usize> {
         [D::from(0.0); N]
     }
 
+    /// The Lagrangian at time `t`, `L(t, q, v)`. Autonomous models keep the default, which
+    /// is [`Self::lagrangian`]. A driven model overrides it (and [`Self::force_at`]) and sets
+    /// `STRUCTURE.uses_time`; its [`Self::lagrangian`] is then its value at `t = 0`.
+    fn lagrangian_at<D: Scalar>(&self, t: D, q: &[D; N], v: &[D; N]) -> D {
+        let _ = t;
+        self.lagrangian(q, v)
+    }
+
+    /// The force at time `t`, `F(t, q, v)`; the default is [`Self::force`].
+    fn force_at<D: Scalar>(&self, t: D, q: &[D; N], v: &[D; N]) -> [D; N] {
+        let _ = t;
+        self.force(q, v)
+    }
+
     /// Stack bytes that one call of a node kernel may need. The integrator runs the
     /// kernels on a stack at least this deep (growing it on the heap when the caller's is
     /// too shallow), so a large model cannot overflow a 2 MiB thread stack. The default
@@ -131,6 +157,60 @@ pub trait ForcedLagrangian<const N: usize> {
         Self: Sized,
     {
         general::node_gradient(self, q, v)
+    }
+
+    /// The node kernel at time `t`: the autonomous [`Self::node_gradient`] unless the model
+    /// uses time.
+    #[inline]
+    fn node_gradient_at(&self, t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>) -> NodeGradient<N>
+    where
+        Self: Sized,
+    {
+        if Self::STRUCTURE.uses_time {
+            general::node_gradient_at(self, t, q, v)
+        } else {
+            self.node_gradient(q, v)
+        }
+    }
+
+    /// The Jacobian node kernel at time `t` (see [`Self::node_gradient_at`]).
+    #[inline]
+    fn node_jacobian_at(&self, t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>) -> NodeJacobian<N>
+    where
+        Self: Sized,
+    {
+        if Self::STRUCTURE.uses_time {
+            general::node_jacobian_at(self, t, q, v)
+        } else {
+            self.node_jacobian(q, v)
+        }
+    }
+
+    /// The mass matrix at time `t`.
+    #[inline]
+    fn mass_matrix_at(&self, t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>) -> SMatrix<f64, N, N>
+    where
+        Self: Sized,
+    {
+        if Self::STRUCTURE.uses_time {
+            general::node_jacobian_at(self, t, q, v).e
+        } else {
+            self.mass_matrix(q, v)
+        }
+    }
+
+    /// `∂L/∂t` at `(t, q, v)`: zero for an autonomous model.
+    fn lagrangian_dt(&self, t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>) -> f64
+    where
+        Self: Sized,
+    {
+        if Self::STRUCTURE.uses_time {
+            let (qa, va): ([f64; N], [f64; N]) = ((*q).into(), (*v).into());
+            let l = self.lagrangian_at(num_dual::Dual64::new(t, 1.0), &lift(&qa), &lift(&va));
+            l.eps
+        } else {
+            0.0
+        }
     }
 
     /// The node kernel for Newton Jacobians: gradient plus the blocks `A, B, C, E`.
@@ -193,17 +273,28 @@ pub mod general {
         q: &SVector<f64, N>,
         v: &SVector<f64, N>,
     ) -> NodeGradient<N> {
+        node_gradient_at(m, 0.0, q, v)
+    }
+
+    /// `(L_q + F, L_v)` at `(t, q, v)`, from [`ForcedLagrangian::lagrangian_at`] and
+    /// [`ForcedLagrangian::force_at`].
+    pub fn node_gradient_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        t: f64,
+        q: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+    ) -> NodeGradient<N> {
         let (qa, va) = (arr(q), arr(v));
         let (_, lq) = gradient(
-            |x: SVector<DualSVec64<N>, N>| m.lagrangian(&arr(&x), &lift(&va)),
+            |x: SVector<DualSVec64<N>, N>| m.lagrangian_at(t.into(), &arr(&x), &lift(&va)),
             q,
         );
         let (_, lv) = gradient(
-            |x: SVector<DualSVec64<N>, N>| m.lagrangian(&lift(&qa), &arr(&x)),
+            |x: SVector<DualSVec64<N>, N>| m.lagrangian_at(t.into(), &lift(&qa), &arr(&x)),
             v,
         );
         let f = if M::STRUCTURE.has_force {
-            SVector::from(m.force::<f64>(&qa, &va))
+            SVector::from(m.force_at::<f64>(t, &qa, &va))
         } else {
             SVector::zeros()
         };
@@ -216,13 +307,23 @@ pub mod general {
         q: &SVector<f64, N>,
         v: &SVector<f64, N>,
     ) -> NodeJacobian<N> {
+        node_jacobian_at(m, 0.0, q, v)
+    }
+
+    /// The gradient and the blocks `A, B, C, E` at `(t, q, v)`.
+    pub fn node_jacobian_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        t: f64,
+        q: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+    ) -> NodeJacobian<N> {
         let (qa, va) = (arr(q), arr(v));
         let (_, _, lqq) = hessian(
-            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian(&arr(&x), &lift(&va)),
+            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian_at(t.into(), &arr(&x), &lift(&va)),
             q,
         );
         let (_, _, lvv) = hessian(
-            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian(&lift(&qa), &arr(&x)),
+            |x: SVector<Dual2SVec64<N>, N>| m.lagrangian_at(t.into(), &lift(&qa), &arr(&x)),
             v,
         );
         // One hyper-dual pass gives L_q, L_v and the mixed block L_qv.
@@ -230,20 +331,24 @@ pub mod general {
             |(x, y): (
                 SVector<HyperDualSVec64<N, N>, N>,
                 SVector<HyperDualSVec64<N, N>, N>,
-            )| m.lagrangian(&arr(&x), &arr(&y)),
+            )| m.lagrangian_at(t.into(), &arr(&x), &arr(&y)),
             (q, v),
         );
         let (mut fq, mut a, mut b) = (lq, lqq, lqv);
         if M::STRUCTURE.has_force {
             let (f, fq_jac) = jacobian(
-                |x: SVector<DualSVec64<N>, N>| SVector::from(m.force(&arr(&x), &lift(&va))),
+                |x: SVector<DualSVec64<N>, N>| {
+                    SVector::from(m.force_at(t.into(), &arr(&x), &lift(&va)))
+                },
                 q,
             );
             fq += f;
             a += fq_jac;
             if M::STRUCTURE.force_uses_velocity {
                 let (_, fv_jac) = jacobian(
-                    |y: SVector<DualSVec64<N>, N>| SVector::from(m.force(&lift(&qa), &arr(&y))),
+                    |y: SVector<DualSVec64<N>, N>| {
+                        SVector::from(m.force_at(t.into(), &lift(&qa), &arr(&y)))
+                    },
                     v,
                 );
                 b += fv_jac;

@@ -14,6 +14,8 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) model: &'a M,
     pub(crate) scheme: &'a Scheme,
     pub(crate) h: f64,
+    /// The step's start time; node `i` is at `t0 + c_i h` (DESIGN §7).
+    pub(crate) t0: f64,
     pub(crate) q0: SVector<f64, N>,
     pub(crate) p0: SVector<f64, N>,
     pub(crate) xs: Vec<SVector<f64, N>>,
@@ -60,7 +62,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         self.nodes(z);
         let (sch, h) = (self.scheme, self.h);
         for i in 0..sch.quadrature_nodes() {
-            let g = self.model.node_gradient(&self.xs[i], &self.vs[i]);
+            let t = self.t0 + sch.c()[i] * h;
+            let g = self.model.node_gradient_at(t, &self.xs[i], &self.vs[i]);
             if !(all_finite(&g.fq) && all_finite(&g.lv)) {
                 return Err(NewtonFailure::NonFinite);
             }
@@ -85,7 +88,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         self.nodes(z);
         let (sch, h) = (self.scheme, self.h);
         for i in 0..sch.quadrature_nodes() {
-            let nj = self.model.node_jacobian(&self.xs[i], &self.vs[i]);
+            let t = self.t0 + sch.c()[i] * h;
+            let nj = self.model.node_jacobian_at(t, &self.xs[i], &self.vs[i]);
             if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
                 return Err(NewtonFailure::NonFinite);
             }

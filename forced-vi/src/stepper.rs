@@ -62,6 +62,7 @@ struct Snapshot<const N: usize> {
     has_prev: bool,
     h_prev: f64,
     scale_f: f64,
+    t_state: f64,
 }
 
 /// Steps a model through time; an iterator over [`StepRecord`]s, initial state first.
@@ -89,8 +90,10 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Sign of the mass matrix's determinant at the start: a step that changes it has
     /// crossed a singular mass.
     mass_sign: f64,
-    /// The current time.
+    /// The time of the record last handed out.
     t: f64,
+    /// The time of the current state `(q, p)` (ahead of `t` between substeps).
+    t_state: f64,
     /// Adaptive runs: the tolerances, the controller and the next step to try.
     tolerance: Option<Tolerance<N>>,
     controller: Controller,
@@ -140,7 +143,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 check("q", &q)?;
                 check("v", &v)?;
                 let (q, v) = (SVector::from(q), SVector::from(v));
-                let g = model.node_gradient(&q, &v);
+                let g = model.node_gradient_at(0.0, &q, &v);
                 if !(all_finite(&g.lv) && all_finite(&g.fq)) {
                     return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
                 }
@@ -158,9 +161,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let scheme = &integ.scheme;
         let s = scheme.stages();
         let r = scheme.quadrature_nodes();
-        let energy0 = energy(model, &q0, &v0, &p0)
+        check_time_flag(model, &q0, &v0)?;
+        let energy0 = energy(model, 0.0, &q0, &v0, &p0)
             .ok_or_else(|| non_finite(q0.amax().max(v0.amax()).max(p0.amax()), 0, 0.0, "energy"))?;
-        let g0 = model.node_gradient(&q0, &v0);
+        let g0 = model.node_gradient_at(0.0, &q0, &v0);
         let zero_jac = NodeJacobian {
             grad: g0,
             a: SMatrix::zeros(),
@@ -173,6 +177,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 model,
                 scheme,
                 h,
+                t0: 0.0,
                 q0,
                 p0,
                 xs: vec![q0; r],
@@ -201,6 +206,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             scale_f: g0.fq.amax(),
             mass_sign,
             t: 0.0,
+            t_state: 0.0,
             tolerance: integ.tolerance,
             controller: Controller::new(scheme.order()),
             h_next: h,
@@ -232,7 +238,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
 
     fn record(&self, newton_iterations: usize, residual: f64, substeps: usize) -> StepRecord<N> {
         let (q, p, v) = (self.q.sum, self.p.sum, self.v);
-        let e = energy(self.prob.model, &q, &v, &p).unwrap_or(f64::NAN);
+        let e = energy(self.prob.model, self.t, &q, &v, &p).unwrap_or(f64::NAN);
         StepRecord {
             step: self.k,
             t: self.t,
@@ -306,6 +312,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             has_prev: self.has_prev,
             h_prev: self.h_prev,
             scale_f: self.scale_f,
+            t_state: self.t_state,
         }
     }
 
@@ -318,6 +325,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         self.has_prev = s.has_prev;
         self.h_prev = s.h_prev;
         self.scale_f = s.scale_f;
+        self.t_state = s.t_state;
     }
 
     /// Fills `z` with the predictor: the previous step's polynomial extrapolated, or a
@@ -351,6 +359,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     fn advance(&mut self, h: f64) -> Result<(usize, f64), StepFailure> {
         self.predict(h);
         self.prob.h = h;
+        self.prob.t0 = self.t_state;
         self.prob.q0 = self.q.sum;
         self.prob.p0 = self.p.sum;
         self.newton.invalidate();
@@ -376,10 +385,17 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             let bi = sch.b()[i];
             dp.axpy(h * bi, &self.prob.grads[i].fq, 1.0);
             fmax = fmax.max(self.prob.grads[i].fq.amax());
-            if M::STRUCTURE.has_force && !self.lean {
+            let (uses_time, lean) = (M::STRUCTURE.uses_time, self.lean);
+            if (M::STRUCTURE.has_force || uses_time) && !lean {
+                // The ledger's increment: the work h Σ b_i F·v, less h Σ b_i ∂L/∂t.
                 let (x, v) = (self.prob.xs[i], self.prob.vs[i]);
-                let f = SVector::from(self.prob.model.force::<f64>(&x.into(), &v.into()));
-                dw += h * bi * f.dot(&v);
+                let ti = self.t_state + sch.c()[i] * h;
+                let model = self.prob.model;
+                if M::STRUCTURE.has_force {
+                    let f = SVector::from(model.force_at::<f64>(ti, &x.into(), &v.into()));
+                    dw += h * bi * f.dot(&v);
+                }
+                dw -= h * bi * model.lagrangian_dt(ti, &x, &v);
             }
         }
         let dq: SVector<f64, N> = self.z.fixed_rows::<N>((s - 2) * N).into_owned();
@@ -394,7 +410,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             // of its determinant: the path crossed a singular mass, where the
             // Euler–Lagrange equations stop being an ODE.
             let q_end = self.q.sum + dq;
-            let e = self.prob.model.mass_matrix(&q_end, &vguess);
+            let e = self
+                .prob
+                .model
+                .mass_matrix_at(self.t_state + h, &q_end, &vguess);
             match mass_factor(&e) {
                 Some((rcond, sign)) if rcond >= MIN_MASS_RCOND && sign == self.mass_sign => {}
                 other => {
@@ -419,6 +438,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         }
         self.has_prev = true;
         self.h_prev = h;
+        self.t_state += h;
         self.scale_f = fmax;
         self.v = vguess;
         Ok((rep.iterations, rep.residual))
@@ -487,6 +507,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     ) -> Result<StepRecord<N>, Error> {
         self.k += 1;
         let t = self.t;
+        // Substeps add up to the step only to round-off: the step's end is exact.
+        self.t_state = t;
         self.stats.steps += 1;
         self.stats.newton_iterations += iters;
         self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
@@ -656,6 +678,34 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
         }
         Some(out)
     }
+}
+
+/// Refuses a model that depends on time but says it does not (`STRUCTURE.uses_time`
+/// false while `lagrangian_at` or `force_at` change with `t`): its kernels would be
+/// evaluated without time.
+fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+) -> Result<(), Error> {
+    if M::STRUCTURE.uses_time {
+        return Ok(());
+    }
+    let (qa, va): ([f64; N], [f64; N]) = ((*q).into(), (*v).into());
+    let l = model.lagrangian::<f64>(&qa, &va);
+    let f = model.force::<f64>(&qa, &va);
+    for t in [0.7390851332151607, -2.5, 1e3] {
+        let same_l = model.lagrangian_at::<f64>(t, &qa, &va).to_bits() == l.to_bits();
+        let ft = model.force_at::<f64>(t, &qa, &va);
+        let same_f = ft.iter().zip(&f).all(|(a, b)| a.to_bits() == b.to_bits());
+        if !(same_l && same_f) {
+            return Err(Error::InvalidModel {
+                message: "lagrangian_at or force_at depends on t, but STRUCTURE.uses_time is false"
+                    .into(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Why one attempt at a step failed.

@@ -22,8 +22,9 @@ pub struct StepRecord<const N: usize> {
     pub v: SVector<f64, N>,
     /// Energy `v · L_v − L`.
     pub energy: f64,
-    /// Energy-balance error `E(t_k) − E(0) − W_k`, with `W_k` the work of the force summed with
-    /// the scheme's own quadrature.
+    /// Energy-balance error `E(t_k) − E(0) − W_k + ∫₀^{t_k} ∂L/∂t`, with the work `W_k` of the
+    /// force and the integral of `∂L/∂t` (zero for an autonomous model) summed with the
+    /// scheme's own quadrature (DESIGN §4, §7).
     pub energy_balance: f64,
     /// Newton iterations (linear solves) this step took, over all attempts.
     pub newton_iterations: usize,
@@ -200,11 +201,12 @@ impl From<StreamFailure> for Error {
 /// `E = v · p − L(q, v)` with `p = L_v`; `None` if not finite.
 pub(crate) fn energy<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
+    t: f64,
     q: &SVector<f64, N>,
     v: &SVector<f64, N>,
     p: &SVector<f64, N>,
 ) -> Option<f64> {
-    let e = v.dot(p) - model.lagrangian::<f64>(&(*q).into(), &(*v).into());
+    let e = v.dot(p) - model.lagrangian_at::<f64>(t, &(*q).into(), &(*v).into());
     e.is_finite().then_some(e)
 }
 
