@@ -28,17 +28,32 @@ fn quick_report_writes_csvs_plots_and_the_paper_orders() {
     let mut lines = wp.lines();
     assert_eq!(
         lines.next(),
-        Some("scene,method,h_or_tol,steps,newton_iters,seconds,err_q,err_p,err_energy")
+        Some("scene,method,h_or_tol,steps,newton_iters,seconds,err_q,err_p,err_energy,mode")
     );
     let rows: Vec<&str> = lines.collect();
     assert!(rows.len() > 100, "{} rows", rows.len());
     for row in &rows {
         let cols: Vec<&str> = row.split(',').collect();
-        assert_eq!(cols.len(), 9, "{row}");
-        for x in &cols[2..] {
+        assert_eq!(cols.len(), 10, "{row}");
+        for x in &cols[2..9] {
             let v: f64 = x.parse().unwrap_or_else(|_| panic!("{row}"));
             assert!(v.is_finite() && v >= 0.0, "{row}");
         }
+        assert!(cols[9] == "fixed" || cols[9] == "adaptive", "{row}");
+        if cols[9] == "adaptive" {
+            assert!(
+                cols[1].starts_with("lobatto") || cols[1] == "midpoint",
+                "{row}"
+            );
+        }
+    }
+    // `--quick` runs every variational scheme adaptively too, on every scene.
+    for method in ["lobatto2", "lobatto3", "lobatto5", "midpoint"] {
+        let adaptive = rows
+            .iter()
+            .filter(|r| r.split(',').nth(1) == Some(method) && r.ends_with(",adaptive"))
+            .count();
+        assert!(adaptive >= 5, "{adaptive} adaptive rows of {method}");
     }
     for scene in [
         "coupled_van_der_pol",
@@ -81,7 +96,9 @@ fn quick_report_writes_csvs_plots_and_the_paper_orders() {
     let readme = read(&out.join("README.md"));
     assert!(readme.starts_with("# forced-vi report"));
     assert!(readme.contains("## Work-precision report"));
-    assert!(out.join("sections/work_precision.md").exists());
+    let section = read(&out.join("sections/work_precision.md"));
+    assert!(section.contains("tolerance proportionality"));
+    assert!(section.contains("`lobatto3 (adaptive)`"));
     for svg in [
         "error_vs_h_coupled_van_der_pol.svg",
         "work_precision_kepler_drag.svg",

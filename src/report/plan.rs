@@ -10,6 +10,11 @@
 //!
 //! Tolerances for the baselines are `rtol = atol = 10^(−3 − k/2)` (full) or `10^(−3 − 2k)`
 //! (quick) down to `10⁻¹³`, stopping in the same ways.
+//!
+//! The adaptive runs of the variational schemes sweep `rtol = atol` over
+//! [`Plan::adaptive_tolerances`]: `10⁻³ … 10⁻¹²` by decades (full), `10⁻⁴, 10⁻⁷, 10⁻¹⁰`
+//! (quick). Second-order schemes stop at [`ORDER2_TOL_FLOOR`]: at `10⁻¹²` they need about
+//! `10⁷` steps.
 
 /// The sweep settings of one report run.
 #[derive(Clone, Debug, PartialEq)]
@@ -30,11 +35,16 @@ pub struct Plan {
     pub timing_budget: f64,
     /// At most this many repeats per point.
     pub max_repeats: usize,
+    /// Tolerances of the adaptive variational runs, loosest first.
+    pub adaptive_tolerances: Vec<f64>,
     /// Final time of the energy-balance long run.
     pub long_run_t: f64,
     /// Samples per curve in the energy-balance plot.
     pub long_run_samples: usize,
 }
+
+/// Schemes of order 2 (`lobatto2`, `midpoint`) are run adaptively down to this tolerance only.
+pub const ORDER2_TOL_FLOOR: f64 = 1e-9;
 
 /// The scene of the energy-balance long run.
 pub const LONG_RUN_SCENE: &str = "coupled_van_der_pol";
@@ -54,6 +64,7 @@ impl Plan {
             tolerances: (0..=20)
                 .map(|k| 10f64.powf(-3.0 - 0.5 * k as f64))
                 .collect(),
+            adaptive_tolerances: (3..=12).map(|k| 10f64.powi(-k)).collect(),
             timing_budget: 0.1,
             max_repeats: 21,
             long_run_t: 1000.0,
@@ -70,6 +81,7 @@ impl Plan {
             full_paper_tail: false,
             max_run_seconds: 0.25,
             tolerances: (0..=5).map(|k| 10f64.powi(-3 - 2 * k)).collect(),
+            adaptive_tolerances: vec![1e-4, 1e-7, 1e-10],
             timing_budget: 0.01,
             max_repeats: 5,
             long_run_t: 1000.0,

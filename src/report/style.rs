@@ -3,8 +3,8 @@
 //! plotters runs with its default features off: the SVG backend and `ab_glyph` for text
 //! metrics, fed with the bundled DejaVu Sans (`assets/DejaVuSans.ttf`, licence beside it), so no
 //! system font library is needed. Each method keeps one colour and marker in every plot;
-//! variational schemes are solid lines with filled circles, baselines dashed lines with
-//! other markers.
+//! variational schemes are solid lines with filled circles (dashed for their adaptive runs),
+//! baselines dashed lines with other markers.
 
 use std::path::Path;
 use std::sync::OnceLock;
@@ -114,6 +114,15 @@ impl Look {
         }
     }
 
+    /// The look of `method`'s adaptive (tolerance-driven) runs: its colour and marker,
+    /// dashed.
+    pub fn adaptive(method: &Method, methods: &[Method]) -> Look {
+        Look {
+            dashed: true,
+            ..Look::of(method, methods)
+        }
+    }
+
     /// The line style.
     pub fn line(&self) -> ShapeStyle {
         ShapeStyle::from(self.color).stroke_width(2)
@@ -206,6 +215,8 @@ mod tests {
         let bdf = Method::Baseline(Baseline::Bdf);
         assert_eq!(Look::of(&l2, &[]).color, PALETTE[0]);
         assert!(Look::of(&bdf, &[]).dashed && !Look::of(&l2, &[]).dashed);
+        assert!(Look::adaptive(&l2, &[]).dashed);
+        assert_eq!(Look::adaptive(&l2, &[]).color, PALETTE[0]);
         assert_eq!(sci(&1e-3), "1e-3");
         assert_eq!(sci(&1.0), "1");
         assert_eq!(log_range([1.0, 4.0, -1.0].into_iter()), Some((0.5, 8.0)));

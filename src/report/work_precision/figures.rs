@@ -5,7 +5,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::rows::{LongRun, Summary};
+use super::rows::{LongRun, Mode, Summary};
 use crate::report::chart::{draw_chart, legend_beside, Axes, Curve};
 use crate::report::style::{self, log_range, plot_err, Look, FAMILY};
 use crate::report::{Method, ReportError};
@@ -108,24 +108,28 @@ fn error_vs_h(path: &Path, scene: &dyn Scene, summary: &Summary) -> Result<bool,
     Ok(true)
 }
 
-/// Error in q against wall time, all methods, one scene.
+/// Error in q against wall time, all methods (fixed-step and adaptive), one scene.
 fn work_precision(path: &Path, scene: &dyn Scene, summary: &Summary) -> Result<bool, String> {
     let curves: Vec<Curve> = summary
-        .methods
+        .series()
         .iter()
-        .filter_map(|m| {
+        .filter_map(|(m, mode)| {
             // In sweep order (decreasing h or tolerance), so that timing noise shows as a
             // kink rather than reordering the line.
             let points: Vec<(f64, f64)> = summary
-                .rows_of(scene.name(), m)
+                .rows_in(scene.name(), m, *mode)
                 .iter()
                 .rev()
                 .map(|r| (r.seconds, r.errors()[0]))
                 .filter(|p| p.0 > 0.0 && p.1 > 0.0)
                 .collect();
+            let look = match mode {
+                Mode::Fixed => Look::of(m, &summary.methods),
+                Mode::Adaptive => Look::adaptive(m, &summary.methods),
+            };
             (!points.is_empty()).then(|| Curve {
-                look: Look::of(m, &summary.methods),
-                label: m.to_string(),
+                look,
+                label: mode.label(m),
                 points,
                 band: None,
             })

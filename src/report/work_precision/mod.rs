@@ -2,7 +2,9 @@
 //!
 //! # What is measured
 //!
-//! For each scene × method × step size (variational) or tolerance (baseline):
+//! For each scene × method × step size (variational, `mode = fixed`), tolerance (variational,
+//! `mode = adaptive`: error control at `rtol = atol = tol`, first step `T`) or tolerance
+//! (baseline, written with `mode = fixed`: the mode is the variational scheme's step control):
 //! - `err_q`, `err_p`: max-norm errors of the positions and momenta at the final time against
 //!   the scene's reference; `err_energy`: the absolute energy error there. For the ensemble
 //!   scene these are means over the members (`ensemble.csv` has the min and max too).
@@ -42,8 +44,8 @@ pub mod sweep;
 
 pub use long_run::LONG_RUN_REFERENCE_H;
 pub use rows::{
-    BalanceCurve, BalanceRecord, EnsembleRecord, Failure, LongRun, OrderRecord, OrderRow, Row,
-    Spread, Summary, WorkPrecisionRecord,
+    BalanceCurve, BalanceRecord, EnsembleRecord, Failure, LongRun, Mode, OrderRecord, OrderRow,
+    Row, Spread, Summary, WorkPrecisionRecord,
 };
 pub use section::TARGETS;
 
@@ -67,8 +69,16 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
     } else {
         opts.methods.clone()
     };
-    let cases: Vec<(usize, Method)> = (0..selected.len())
-        .flat_map(|i| methods.iter().map(move |m| (i, *m)))
+    let modes = |m: &Method| {
+        let adaptive = m.is_variational().then_some(Mode::Adaptive);
+        std::iter::once(Mode::Fixed).chain(adaptive)
+    };
+    let cases: Vec<(usize, Method, Mode)> = (0..selected.len())
+        .flat_map(|i| {
+            methods
+                .iter()
+                .flat_map(move |m| modes(m).map(move |d| (i, *m, d)))
+        })
         .collect();
     let sweeps = sweep::Sweeps {
         scenes: &selected,

@@ -7,6 +7,53 @@ use crate::report::table::{sci, text};
 use crate::report::Method;
 use crate::scenes::BalanceSeries;
 
+/// How a variational scheme chooses its steps: `fixed` (a step size `h`, and every baseline
+/// row, swept over its own tolerance) or `adaptive` (error control at `rtol = atol = tol`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Mode {
+    /// A fixed step `h` (and the baselines' rows).
+    #[default]
+    Fixed,
+    /// Tolerance-driven steps of a variational scheme.
+    Adaptive,
+}
+
+impl Mode {
+    /// `fixed` or `adaptive`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Fixed => "fixed",
+            Mode::Adaptive => "adaptive",
+        }
+    }
+
+    /// The label of `method` run in this mode: `lobatto3` or `lobatto3 (adaptive)`.
+    pub fn label(self, method: &Method) -> String {
+        match self {
+            Mode::Fixed => method.to_string(),
+            Mode::Adaptive => format!("{method} (adaptive)"),
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "fixed" => Ok(Mode::Fixed),
+            "adaptive" => Ok(Mode::Adaptive),
+            other => Err(format!("unknown mode `{other}`")),
+        }
+    }
+}
+
 /// Minimum, mean and maximum over ensemble members.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spread {
@@ -25,9 +72,11 @@ pub struct Row {
     pub scene: &'static str,
     /// The method.
     pub method: Method,
-    /// `h` for variational schemes, the tolerance for baselines.
+    /// Fixed or adaptive steps.
+    pub mode: Mode,
+    /// `h` for fixed-step variational runs, the tolerance otherwise.
     pub h_or_tol: f64,
-    /// Steps (summed over members).
+    /// Steps (summed over members; accepted steps of adaptive runs).
     pub steps: usize,
     /// Newton iterations (summed over members).
     pub newton_iters: usize,
@@ -51,6 +100,8 @@ pub struct Failure {
     pub scene: &'static str,
     /// The method.
     pub method: Method,
+    /// Fixed or adaptive steps.
+    pub mode: Mode,
     /// Its step size or tolerance.
     pub h_or_tol: f64,
     /// What went wrong.
@@ -118,22 +169,47 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// The rows of `method` on `scene`, by increasing `h` or tolerance.
+    /// The fixed-step rows of `method` on `scene` (every row of a baseline), by increasing
+    /// `h` or tolerance.
     pub fn rows_of(&self, scene: &str, method: &Method) -> Vec<&Row> {
+        self.rows_in(scene, method, Mode::Fixed)
+    }
+
+    /// The rows of `method` run in `mode` on `scene`, by increasing `h` or tolerance.
+    pub fn rows_in(&self, scene: &str, method: &Method, mode: Mode) -> Vec<&Row> {
         let mut rows: Vec<&Row> = self
             .rows
             .iter()
-            .filter(|r| r.scene == scene && &r.method == method)
+            .filter(|r| r.scene == scene && &r.method == method && r.mode == mode)
             .collect();
         rows.sort_by(|a, b| a.h_or_tol.total_cmp(&b.h_or_tol));
         rows
     }
 
-    /// The cheapest measured run of `method` on `scene` with `err_q ≤ target`.
-    pub fn cheapest_time(&self, scene: &str, method: &Method, target: f64) -> Option<f64> {
-        self.rows
-            .iter()
-            .filter(|r| r.scene == scene && &r.method == method && r.errors()[0] <= target)
+    /// The `(method, mode)` pairs measured, in method order, each method's adaptive runs
+    /// right after its fixed ones.
+    pub fn series(&self) -> Vec<(Method, Mode)> {
+        let mut out = Vec::new();
+        for m in &self.methods {
+            for mode in [Mode::Fixed, Mode::Adaptive] {
+                if self.rows.iter().any(|r| &r.method == m && r.mode == mode) {
+                    out.push((*m, mode));
+                }
+            }
+        }
+        out
+    }
+
+    /// The cheapest measured run of `method` in `mode` on `scene` with `err_q ≤ target`.
+    pub fn cheapest_time(
+        &self,
+        scene: &str,
+        (method, mode): (&Method, Mode),
+        target: f64,
+    ) -> Option<f64> {
+        self.rows_in(scene, method, mode)
+            .into_iter()
+            .filter(|r| r.errors()[0] <= target)
             .map(|r| r.seconds)
             .min_by(f64::total_cmp)
     }
@@ -166,6 +242,9 @@ pub struct WorkPrecisionRecord {
     /// Error in the energy.
     #[serde(with = "sci")]
     pub err_energy: f64,
+    /// `fixed` or `adaptive` (appended, so older readers of the columns before it still work).
+    #[serde(with = "text")]
+    pub mode: Mode,
 }
 
 impl From<&Row> for WorkPrecisionRecord {
@@ -181,6 +260,7 @@ impl From<&Row> for WorkPrecisionRecord {
             err_q,
             err_p,
             err_energy,
+            mode: r.mode,
         }
     }
 }

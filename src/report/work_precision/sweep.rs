@@ -3,9 +3,9 @@
 use forced_vi::Scheme;
 use rayon::prelude::*;
 
-use super::rows::{Failure, OrderRow, Row, Spread, Summary};
+use super::rows::{Failure, Mode, OrderRow, Row, Spread, Summary};
 use crate::report::orders;
-use crate::report::plan::{Plan, PAPER_SCENE};
+use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE};
 use crate::report::study::Study;
 use crate::report::timing;
 use crate::report::Method;
@@ -29,25 +29,26 @@ pub struct Sweeps<'a> {
 }
 
 impl Study for Sweeps<'_> {
-    /// `(scene index, method)`.
-    type Case = (usize, Method);
+    /// `(scene index, method, mode)`.
+    type Case = (usize, Method, Mode);
     type Row = Swept;
     const PARALLEL: bool = false;
 
-    fn label(&self, &(i, m): &Self::Case) -> String {
-        format!("{} {m}", self.scenes[i].name())
+    fn label(&self, &(i, m, mode): &Self::Case) -> String {
+        format!("{} {}", self.scenes[i].name(), mode.label(&m))
     }
 
-    fn run(&self, &(i, m): &Self::Case) -> Swept {
-        sweep(self.scenes[i], &m, self.plan)
+    fn run(&self, &(i, m, mode): &Self::Case) -> Swept {
+        sweep(self.scenes[i], &m, mode, self.plan)
     }
 
-    fn panicked(&self, &(i, m): &Self::Case) -> Swept {
+    fn panicked(&self, &(i, m, mode): &Self::Case) -> Swept {
         Swept {
             rows: Vec::new(),
             failures: vec![Failure {
                 scene: self.scenes[i].name(),
                 method: m,
+                mode,
                 h_or_tol: f64::NAN,
                 message: "the sweep panicked".into(),
             }],
@@ -82,11 +83,14 @@ pub fn reference_scale(scene: &dyn Scene) -> [f64; 3] {
 /// Runs one method at one `h` or tolerance on every member of a scene (members in parallel).
 fn run_members(
     scene: &dyn Scene,
-    method: &Method,
+    (method, mode): (&Method, Mode),
     scheme: Option<&Scheme>,
     x: f64,
 ) -> Result<Vec<Outcome>, String> {
     let one = |member: usize| match (method, scheme) {
+        (Method::Variational(_), Some(s)) if mode == Mode::Adaptive => {
+            scene.run_adaptive(s, x, member)
+        }
         (Method::Variational(_), Some(s)) => scene.run_variational(s, x, member),
         (Method::Baseline(b), _) => scene.run_baseline(*b, x, member),
         (Method::Variational(id), None) => Err(SceneError::Variational(
@@ -131,19 +135,20 @@ fn spreads(scene: &dyn Scene, outcomes: &[Outcome]) -> Result<[Spread; 3], Strin
 /// the first repeat.
 fn measure(
     scene: &dyn Scene,
-    method: &Method,
+    (method, mode): (&Method, Mode),
     scheme: Option<&Scheme>,
     x: f64,
     plan: &Plan,
 ) -> Result<(Row, f64), String> {
     let timing = timing::repeated(
         |first| plan.repeats(first),
-        || run_members(scene, method, scheme, x),
+        || run_members(scene, (method, mode), scheme, x),
     )?;
     let outcomes = timing.first;
     let row = Row {
         scene: scene.name(),
         method: *method,
+        mode,
         h_or_tol: x,
         steps: outcomes.iter().map(|o| o.steps).sum(),
         newton_iters: outcomes.iter().map(|o| o.newton_iterations).sum(),
@@ -153,23 +158,33 @@ fn measure(
     Ok((row, timing.first_seconds))
 }
 
-/// The grid of `method` on `scene`.
-pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method) -> Vec<f64> {
-    match method {
-        Method::Variational(_) => plan.step_sizes(scene.t_final()),
-        Method::Baseline(_) => plan.tolerances.clone(),
+/// The grid of `method` in `mode` on `scene`: step sizes, or tolerances (second-order
+/// schemes stop at [`ORDER2_TOL_FLOOR`] in adaptive mode).
+pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method, mode: Mode) -> Vec<f64> {
+    match (method, mode) {
+        (Method::Variational(_), Mode::Fixed) => plan.step_sizes(scene.t_final()),
+        (Method::Variational(_), Mode::Adaptive) => {
+            let order = method.scheme().map_or(0, |s| s.order());
+            let floor = if order <= 2 { ORDER2_TOL_FLOOR } else { 0.0 };
+            let tols = plan.adaptive_tolerances.iter().copied();
+            tols.filter(|t| *t >= floor).collect()
+        }
+        (Method::Baseline(_), _) => plan.tolerances.clone(),
     }
 }
 
 /// Sweeps one method over its grid on one scene, stopping early as [`Plan`] says.
-fn sweep(scene: &dyn Scene, method: &Method, plan: &Plan) -> Swept {
+fn sweep(scene: &dyn Scene, method: &Method, mode: Mode, plan: &Plan) -> Swept {
     let scheme = method.scheme();
     let scale = reference_scale(scene);
-    let keep_tail = plan.full_paper_tail && method.is_variational() && scene.name() == PAPER_SCENE;
+    let keep_tail = plan.full_paper_tail
+        && method.is_variational()
+        && mode == Mode::Fixed
+        && scene.name() == PAPER_SCENE;
     let mut out = Swept::default();
     let mut floor_run = 0;
-    for x in grid(plan, scene, method) {
-        match measure(scene, method, scheme.as_ref(), x, plan) {
+    for x in grid(plan, scene, method, mode) {
+        match measure(scene, (method, mode), scheme.as_ref(), x, plan) {
             Ok((row, first)) => {
                 let e = row.errors();
                 if orders::at_floor(e[0], scale[0]) && orders::at_floor(e[1], scale[1]) {
@@ -185,6 +200,7 @@ fn sweep(scene: &dyn Scene, method: &Method, plan: &Plan) -> Swept {
             Err(message) => out.failures.push(Failure {
                 scene: scene.name(),
                 method: *method,
+                mode,
                 h_or_tol: x,
                 message,
             }),
@@ -209,6 +225,7 @@ pub fn fit_orders(scenes: &[&dyn Scene], summary: &mut Summary) {
                     .rows
                     .iter()
                     .filter(|r| r.scene == scene.name() && r.method == method)
+                    .filter(|r| r.mode == Mode::Fixed)
                     .map(|r| (r.h_or_tol, r.errors()[k]))
                     .collect();
                 orders::observed_order(&pts, scale[k])
