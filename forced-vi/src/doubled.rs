@@ -13,7 +13,8 @@ use num_dual::{partial_hessian, HyperDualSVec64};
 use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
 use crate::scalar::{lift, Scalar};
 
-/// The doubled Lagrangian `Λ(q, v, Q, V)`.
+/// The doubled Lagrangian `Λ(q, v, Q, V)` of an autonomous model (at `t = 0` for a driven
+/// one; see [`doubled_lagrangian_at`]).
 pub fn doubled_lagrangian<M, D, const N: usize>(
     model: &M,
     q: &[D; N],
@@ -25,10 +26,27 @@ where
     M: ForcedLagrangian<N>,
     D: Scalar,
 {
-    let mut lambda = model.lagrangian(qq, vv) - model.lagrangian(q, v);
+    doubled_lagrangian_at(model, D::from(0.0), q, v, qq, vv)
+}
+
+/// The doubled Lagrangian with time carried along (DESIGN §7):
+/// `Λ(t, q, v, Q, V) = L(t, Q, V) − L(t, q, v) + ½(F(t, q, v) + F(t, Q, V))·(Q − q)`.
+pub fn doubled_lagrangian_at<M, D, const N: usize>(
+    model: &M,
+    t: D,
+    q: &[D; N],
+    v: &[D; N],
+    qq: &[D; N],
+    vv: &[D; N],
+) -> D
+where
+    M: ForcedLagrangian<N>,
+    D: Scalar,
+{
+    let mut lambda = model.lagrangian_at(t, qq, vv) - model.lagrangian_at(t, q, v);
     if M::STRUCTURE.has_force {
-        let f = model.force(q, v);
-        let ff = model.force(qq, vv);
+        let f = model.force_at(t, q, v);
+        let ff = model.force_at(t, qq, vv);
         for i in 0..N {
             lambda += (f[i] + ff[i]) * (qq[i] - q[i]) * 0.5;
         }

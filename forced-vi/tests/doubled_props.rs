@@ -1,9 +1,9 @@
 //! Property tests of the doubled Lagrangian and the general node kernels.
 
-use forced_vi::doubled::{doubled_lagrangian, physical_limit_blocks};
+use forced_vi::doubled::{doubled_lagrangian, doubled_lagrangian_at, physical_limit_blocks};
 use forced_vi::model::general;
 use forced_vi::prelude::*;
-use forced_vi::NodeJacobian;
+use forced_vi::{NodeJacobian, Structure};
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
 
@@ -58,6 +58,22 @@ fn close(x: &SMatrix<f64, 2, 2>, y: &SMatrix<f64, 2, 2>, tol: f64) -> bool {
     (x - y).amax() <= tol * (1.0 + y.amax())
 }
 
+/// A driven model: `L(t, q, v)` and `F(t, q, v)` both depend on time.
+struct Driven;
+
+impl ForcedLagrangian<2> for Driven {
+    const STRUCTURE: Structure = Structure::GENERAL_DRIVEN;
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        self.lagrangian_at(D::from(0.0), q, v)
+    }
+    fn lagrangian_at<D: Scalar>(&self, t: D, q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] + v[1] * v[1]) * 0.5 + v[0] * q[1] * t.sin() - (q[0] * q[0]) * (t.cos() + 2.0)
+    }
+    fn force_at<D: Scalar>(&self, t: D, q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+        [-v[0] * 0.1 + (t * 3.0).cos(), -v[1] * q[0] * t]
+    }
+}
+
 fn vec2() -> impl Strategy<Value = SVector<f64, 2>> {
     (-2.0..2.0f64, -2.0..2.0f64).prop_map(|(a, b)| SVector::from([a, b]))
 }
@@ -72,6 +88,15 @@ proptest! {
         let (q, v, qq, vv) = (q.into(), v.into(), qq.into(), vv.into());
         let l1: f64 = doubled_lagrangian(&m, &q, &v, &qq, &vv);
         let l2: f64 = doubled_lagrangian(&m, &qq, &vv, &q, &v);
+        prop_assert!((l1 + l2).abs() <= 1e-12 * (1.0 + l1.abs()));
+    }
+
+    #[test]
+    fn doubled_lagrangian_with_time_is_odd(q in vec2(), v in vec2(), qq in vec2(),
+                                           vv in vec2(), t in -10.0..10.0f64) {
+        let (q, v, qq, vv) = (q.into(), v.into(), qq.into(), vv.into());
+        let l1: f64 = doubled_lagrangian_at(&Driven, t, &q, &v, &qq, &vv);
+        let l2: f64 = doubled_lagrangian_at(&Driven, t, &qq, &vv, &q, &v);
         prop_assert!((l1 + l2).abs() <= 1e-12 * (1.0 + l1.abs()));
     }
 
