@@ -51,10 +51,12 @@
 //! | records, energy and energy balance (DESIGN §4), run totals, failures | [`trajectory`] |
 //! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
 //! | the integrator builder and its run methods | [`integrator`] |
+//! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
 
 pub mod control;
 pub mod doubled;
+pub mod ensemble;
 mod error;
 pub mod initial;
 pub mod integrator;
@@ -67,6 +69,7 @@ pub mod stepper;
 pub mod trajectory;
 
 pub use control::Tolerance;
+pub use ensemble::FinalState;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
 pub use integrator::{Integrator, StepOptions, MAX_KERNEL_STACK};
