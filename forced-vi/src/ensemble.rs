@@ -29,23 +29,14 @@
 //! let integrator = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?;
 //! let ends = integrator.run_ensemble_final(&members, 1.0);
 //! assert_eq!(ends.len(), 8);
-//! assert!(ends.iter().all(|end| end.as_ref().is_ok_and(|e| e.record.step == 100)));
+//! assert!(ends.iter().all(|end| end.as_ref().is_ok_and(|e| e.stats.steps == 100)));
 //! # Ok::<(), forced_vi::Error>(())
 //! ```
 
 use crate::initial::InitialState;
 use crate::integrator::Integrator;
 use crate::model::ForcedLagrangian;
-use crate::trajectory::{RunFailure, RunStats, StepRecord, StreamFailure, Trajectory};
-
-/// The end of one member's run, without its intermediate records.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FinalState<const N: usize> {
-    /// The last record (at the final time).
-    pub record: StepRecord<N>,
-    /// The run's totals.
-    pub stats: RunStats,
-}
+use crate::trajectory::{FinalState, RunFailure, StreamFailure, Trajectory};
 
 /// Applies `f` to every member, in parallel with the feature `rayon`, and returns the
 /// results in the members' order. The building block of the ensemble runs, public for
@@ -102,24 +93,13 @@ where
     }
 
     /// Like [`run_ensemble`](Self::run_ensemble) but keeps only each member's final state
-    /// and totals: memory does not grow with the number of steps
-    /// (see [`Integrator::for_each_step`]).
+    /// and totals, the cheapest run ([`Integrator::final_state`]): memory does not grow with
+    /// the number of steps, and the per-step diagnostics are left out.
     pub fn run_ensemble_final(
         &self,
         members: &[InitialState<N>],
         t_final: f64,
     ) -> Vec<Result<FinalState<N>, StreamFailure>> {
-        map(members, |init| {
-            let mut last = None;
-            let stats = self.for_each_step(*init, t_final, |r| last = Some(*r))?;
-            // A successful run has at least its initial record.
-            match last {
-                Some(record) => Ok(FinalState { record, stats }),
-                None => Err(StreamFailure {
-                    error: crate::Error::InvalidFinalTime { t_final },
-                    stats,
-                }),
-            }
-        })
+        map(members, |init| self.final_state(*init, t_final))
     }
 }

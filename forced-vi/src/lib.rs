@@ -69,7 +69,6 @@ pub mod stepper;
 pub mod trajectory;
 
 pub use control::Tolerance;
-pub use ensemble::FinalState;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
 pub use integrator::{Integrator, StepOptions, MAX_KERNEL_STACK};
@@ -79,7 +78,8 @@ pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
 pub use stepper::Stepper;
 pub use trajectory::{
-    DenseState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure, Trajectory,
+    DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure,
+    Trajectory,
 };
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.

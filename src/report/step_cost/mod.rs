@@ -10,12 +10,12 @@
 //! sections/step_cost.md   the section of README.md (targets of issue 6, met or not)
 //! ```
 //!
-//! - `coupled_van_der_pol` rows: the paper's model ([`CoupledVanDerPol::PAPER`]) against
-//!   [`HandCoupledVanDerPol::PAPER`] for each scheme at `h = 0.01`, through the same
-//!   [`Integrator`] (same predictor, Newton options and tolerances). Repeats alternate
+//! - `coupled_van_der_pol` rows: the paper's model ([`CoupledVanDerPol::PAPER`](crate::models::CoupledVanDerPol::PAPER)) against
+//!   [`HandCoupledVanDerPol::PAPER`](crate::handwritten::HandCoupledVanDerPol::PAPER) for each scheme at `h = 0.01`, through the same
+//!   [`Integrator`](forced_vi::Integrator) (same predictor, Newton options and tolerances). Repeats alternate
 //!   generated and hand-written runs so that machine noise hits both alike; the medians are
 //!   reported.
-//! - `spring_chain` rows: [`SpringChain<N>`] with `lobatto2` for `n = 2 … 2048`, no
+//! - `spring_chain` rows: [`SpringChain<N>`](crate::models::SpringChain) with `lobatto2` for `n = 2 … 2048`, no
 //!   hand-written counterpart. Each size runs in its own thread with a stack large enough for
 //!   the runtime's static `N × N` node blocks.
 //! - allocations: counted by the binary's counting allocator between the first and the last
