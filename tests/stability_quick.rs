@@ -20,14 +20,32 @@ fn extreme_stability_quick_report() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("scene,method,h,outcome,steps_done,max_newton_iters,err_final,max_energy_balance_err")
+        Some(
+            "scene,method,h,outcome,steps_done,max_newton_iters,err_final,\
+             max_energy_balance_err,mode,tol"
+        )
     );
     let rows: Vec<&str> = lines.collect();
     assert!(rows.len() >= 20, "{} rows", rows.len());
     let mut scenes = std::collections::BTreeSet::new();
+    let mut adaptive = 0;
     for row in &rows {
         let cols: Vec<&str> = row.split(',').collect();
-        assert_eq!(cols.len(), 8, "{row}");
+        assert_eq!(cols.len(), 10, "{row}");
+        match cols[8] {
+            "fixed" => assert_eq!(cols[9], "", "{row}"),
+            "adaptive" => {
+                adaptive += 1;
+                let tol: f64 = cols[9].parse().unwrap_or_else(|_| panic!("{row}"));
+                assert!(tol > 0.0 && tol < 1.0, "{row}");
+                // Every finished adaptive run is within 100·tol of the reference.
+                if matches!(cols[3], "ok" | "recovered") {
+                    let err: f64 = cols[6].parse().unwrap();
+                    assert!(err <= 100.0 * tol, "{row}");
+                }
+            }
+            m => panic!("mode `{m}`: {row}"),
+        }
         scenes.insert(cols[0]);
         let h: f64 = cols[2].parse().unwrap();
         assert!(h.is_finite() && h > 0.0, "{row}");
@@ -50,8 +68,10 @@ fn extreme_stability_quick_report() {
         }
     }
     assert!(scenes.len() >= 5, "{scenes:?}");
+    assert!(adaptive >= 5, "{adaptive} adaptive rows");
 
     let readme = fs::read_to_string(out.join("README.md")).unwrap();
     assert!(readme.contains("## Stability on stiff and extreme cases"));
-    assert!(out.join("sections").join("stability.md").exists());
+    let section = fs::read_to_string(out.join("sections").join("stability.md")).unwrap();
+    assert!(section.contains("### Adaptive runs"));
 }

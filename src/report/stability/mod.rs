@@ -5,8 +5,13 @@
 //! one row of `stability.csv`:
 //!
 //! ```text
-//! scene,method,h,outcome,steps_done,max_newton_iters,err_final,max_energy_balance_err
+//! scene,method,h,outcome,steps_done,max_newton_iters,err_final,max_energy_balance_err,mode,tol
 //! ```
+//!
+//! - `mode` is `fixed` (step `h`, subdivision allowed) or `adaptive`: error control at
+//!   `rtol = atol = tol` (`tol` is empty in fixed rows), first step `h` = the whole interval,
+//!   no subdivision (the controller rejects and shrinks failed steps). Adaptive rows follow
+//!   the fixed ones.
 //!
 //! - `outcome` is `ok`, `recovered` (the run finished but at least one step needed
 //!   subdivision) or `failed:<kind>` with the [`forced_vi::Error::kind`] of the error that
@@ -72,6 +77,7 @@ impl Study for VariationalRuns<'_> {
             scene: self.0[i].0.name(),
             method: id.to_string(),
             h,
+            tol: None,
             outcome: Outcome::Failed("panic".into()),
             steps_done: 0,
             max_newton_iters: 0,
@@ -79,6 +85,30 @@ impl Study for VariationalRuns<'_> {
             max_energy_balance_err: f64::NAN,
             subdivided_steps: 0,
             seconds: 0.0,
+        }
+    }
+}
+
+/// The adaptive variational runs: one case per scene (index) × scheme × tolerance.
+struct AdaptiveRuns<'a>(&'a [&'a Planned]);
+
+impl Study for AdaptiveRuns<'_> {
+    type Case = (usize, SchemeId, f64);
+    type Row = Row;
+    const PARALLEL: bool = true;
+
+    fn label(&self, &(i, id, tol): &Self::Case) -> String {
+        format!("{} {id} adaptive {tol:.0e}", self.0[i].0.name())
+    }
+
+    fn run(&self, &(i, id, tol): &Self::Case) -> Row {
+        self.0[i].0.adaptive(id, tol)
+    }
+
+    fn panicked(&self, &(i, id, tol): &Self::Case) -> Row {
+        Row {
+            tol: Some(tol),
+            ..VariationalRuns(self.0).panicked(&(i, id, f64::NAN))
         }
     }
 }
@@ -136,6 +166,31 @@ fn variational_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, S
     jobs
 }
 
+/// The adaptive cases: the scene's schemes (or `--method`) × its adaptive tolerances,
+/// tightest first.
+fn adaptive_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, SchemeId, f64)> {
+    let filter: Vec<SchemeId> = methods
+        .iter()
+        .filter_map(|m| match m {
+            Method::Variational(id) => Some(*id),
+            Method::Baseline(_) => None,
+        })
+        .collect();
+    let mut jobs = Vec::new();
+    for (i, (_, grid)) in selected.iter().enumerate() {
+        let ids = if filter.is_empty() {
+            &grid.adaptive_methods
+        } else {
+            &filter
+        };
+        for &id in ids {
+            jobs.extend(grid.adaptive_tols.iter().map(|&t| (i, id, t)));
+        }
+    }
+    jobs.sort_by(|a, b| a.2.total_cmp(&b.2));
+    jobs
+}
+
 /// The baseline cases: the stiff solvers, or the implicit ones among `--method`.
 fn baseline_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, Baseline, f64)> {
     let solvers: Vec<Baseline> = if methods.is_empty() {
@@ -176,14 +231,22 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
             .cmp(&(pos(b.scene), &b.method))
             .then(b.h.total_cmp(&a.h))
     });
+    let ajobs = adaptive_cases(&selected, &opts.methods);
+    let mut adaptive = run_cases(&AdaptiveRuns(&selected), &ajobs, opts.progress);
+    adaptive.sort_by(|a, b| {
+        (pos(a.scene), &a.method)
+            .cmp(&(pos(b.scene), &b.method))
+            .then(b.tol.unwrap_or(0.0).total_cmp(&a.tol.unwrap_or(0.0)))
+    });
     let bjobs = baseline_cases(&selected, &opts.methods);
     let baselines = run_cases(&BaselineRuns(&selected), &bjobs, opts.progress);
 
     std::fs::create_dir_all(&opts.out).map_err(ReportError::io(&opts.out))?;
-    let records: Vec<StabilityRecord> = rows.iter().map(Into::into).collect();
+    let records: Vec<StabilityRecord> = rows.iter().chain(&adaptive).map(Into::into).collect();
     write_csv(&opts.out.join("stability.csv"), &records)?;
     let summary = Summary {
         rows,
+        adaptive,
         baselines,
         elapsed: started.elapsed().as_secs_f64(),
     };

@@ -40,6 +40,8 @@ pub trait Case: Sync {
     /// Estimated absolute error of the reference.
     fn accuracy(&self) -> f64;
     fn variational(&self, id: SchemeId, h: f64) -> Row;
+    /// An adaptive run at `rtol = atol = tol`, first step the whole interval.
+    fn adaptive(&self, id: SchemeId, tol: f64) -> Row;
     fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow;
 }
 
@@ -60,13 +62,16 @@ pub(super) fn q_error(q: &[f64], reference: &[f64]) -> f64 {
 }
 
 impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
-    /// Runs `id` with step `h_model` (model time) and subdivision.
-    fn run(&self, id: SchemeId, h_model: f64) -> Row {
+    /// Runs `id` with step `h_model` (model time) and subdivision, or adaptively at
+    /// `rtol = atol = tol` from a first step `h_model` (no subdivision: the controller
+    /// rejects and shrinks failed steps).
+    fn run(&self, id: SchemeId, h_model: f64, tol: Option<f64>) -> Row {
         let start = Instant::now();
         let mut row = Row {
             scene: self.name,
             method: id.to_string(),
             h: h_model / self.time_scale,
+            tol,
             outcome: Outcome::Ok,
             steps_done: 0,
             max_newton_iters: 0,
@@ -82,8 +87,12 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
                 return row;
             }
         };
-        let integ = match Integrator::new(&self.model, scheme, h_model) {
-            Ok(i) => i.max_subdivisions(MAX_SUBDIVISIONS),
+        let built = Integrator::new(&self.model, scheme, h_model).and_then(|i| match tol {
+            Some(t) => i.tolerances(t, t),
+            None => Ok(i.max_subdivisions(MAX_SUBDIVISIONS)),
+        });
+        let integ = match built {
+            Ok(i) => i,
             Err(e) => {
                 row.outcome = Outcome::Failed(e.kind());
                 return row;
@@ -173,7 +182,10 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Case for Problem<M, N> {
         self.reference_accuracy
     }
     fn variational(&self, id: SchemeId, h: f64) -> Row {
-        self.run(id, h * self.time_scale)
+        self.run(id, h * self.time_scale, None)
+    }
+    fn adaptive(&self, id: SchemeId, tol: f64) -> Row {
+        self.run(id, self.t_final, Some(tol))
     }
     fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow {
         let (res, seconds) = timed(|| self.baseline_q(solver, tol));

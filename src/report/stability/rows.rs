@@ -39,11 +39,13 @@ pub struct Row {
     pub scene: &'static str,
     /// Scheme name.
     pub method: String,
-    /// Step size, in the scene's time unit.
+    /// Step size, in the scene's time unit (the first step of an adaptive run).
     pub h: f64,
+    /// `rtol = atol` of an adaptive run; `None` for a fixed step.
+    pub tol: Option<f64>,
     /// How the run ended.
     pub outcome: Outcome,
-    /// Steps completed.
+    /// Steps completed (accepted steps of an adaptive run).
     pub steps_done: usize,
     /// Largest Newton iteration count of one step.
     pub max_newton_iters: usize,
@@ -79,8 +81,10 @@ pub struct BaselineRow {
 /// What a `stability` run produced.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Summary {
-    /// The variational rows, as written to `stability.csv`.
+    /// The fixed-step variational rows, as written to `stability.csv`.
     pub rows: Vec<Row>,
+    /// The adaptive variational rows, written after them.
+    pub adaptive: Vec<Row>,
     /// The stiff-baseline runs of the comparison.
     pub baselines: Vec<BaselineRow>,
     /// Wall time of the whole command, seconds.
@@ -125,6 +129,11 @@ pub struct StabilityRecord {
     /// Largest absolute energy-balance error.
     #[serde(with = "sci")]
     pub max_energy_balance_err: f64,
+    /// `fixed` or `adaptive`.
+    pub mode: String,
+    /// `rtol = atol` of an adaptive row; empty for fixed rows.
+    #[serde(with = "sci::opt")]
+    pub tol: Option<f64>,
 }
 
 impl From<&Row> for StabilityRecord {
@@ -138,6 +147,8 @@ impl From<&Row> for StabilityRecord {
             max_newton_iters: r.max_newton_iters,
             err_final: r.err_final,
             max_energy_balance_err: r.max_energy_balance_err,
+            mode: if r.tol.is_some() { "adaptive" } else { "fixed" }.to_string(),
+            tol: r.tol,
         }
     }
 }

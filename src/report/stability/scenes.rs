@@ -35,6 +35,11 @@ pub struct Grid {
     pub methods: Vec<SchemeId>,
     /// Tolerances of the stiff baselines.
     pub tols: Vec<f64>,
+    /// Tolerances `rtol = atol` of the adaptive variational runs.
+    pub adaptive_tols: Vec<f64>,
+    /// The schemes run adaptively (`--quick`: `lobatto3` only; second-order schemes need
+    /// millions of steps on the stiff scenes).
+    pub adaptive_methods: Vec<SchemeId>,
 }
 
 /// A scene with its grid.
@@ -75,6 +80,16 @@ impl Common {
             hs,
             methods: self.methods.clone(),
             tols: self.tols.clone(),
+            adaptive_tols: if self.quick {
+                vec![1e-3, 1e-5]
+            } else {
+                (3..=8).map(|k| 10f64.powi(-k)).collect()
+            },
+            adaptive_methods: if self.quick {
+                vec![SchemeId::Lobatto(3)]
+            } else {
+                self.methods.clone()
+            },
         }
     }
 }

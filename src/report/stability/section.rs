@@ -6,7 +6,7 @@ use super::problem::Case;
 use super::rows::{BaselineRow, Outcome, Row, Summary, MAX_SUBDIVISIONS};
 use super::scenes::Planned;
 use crate::baselines::Baseline;
-use crate::report::table::{col, fmt_e, markdown};
+use crate::report::table::{col, fmt_e, fmt_time, markdown};
 
 /// The error targets of the comparison with the stiff baselines.
 const TARGETS: [f64; 4] = [1e-2, 1e-4, 1e-6, 1e-8];
@@ -34,6 +34,7 @@ pub fn markdown_section(s: &Summary, planned: &[&Planned], quick: bool) -> Strin
     md.push_str(&scenes_table(planned));
     md.push_str(&outcomes(s, &cases));
     md.push_str(&runs(s, &cases));
+    md.push_str(&adaptive(s, &cases));
     md.push_str(&against_baselines(s, planned, &cases));
     md.push_str(&baseline_failures(s));
     md.push_str(NOTES);
@@ -328,6 +329,107 @@ fn baseline_failures(s: &Summary) -> String {
             r.scene, r.solver, r.tol
         );
     }
+    md.push('\n');
+    md
+}
+
+/// Whether a finished adaptive run misses its tolerance: `err_final > 100·tol`, or more than
+/// ten times the reference's own error where that is larger (the reference cannot judge
+/// below it).
+fn misses_tol(r: &Row, accuracy: f64) -> bool {
+    let tol = r.tol.unwrap_or(f64::INFINITY);
+    let bound = (100.0 * tol).max(if accuracy.is_finite() {
+        10.0 * accuracy
+    } else {
+        0.0
+    });
+    let within = r.err_final <= bound;
+    !matches!(r.outcome, Outcome::Failed(_)) && !within
+}
+
+/// The adaptive rows: outcomes by scene, then every run.
+fn adaptive(s: &Summary, cases: &[&dyn Case]) -> String {
+    if s.adaptive.is_empty() {
+        return String::new();
+    }
+    let case = |r: &Row| cases.iter().find(|c| c.name() == r.scene).copied();
+    let accuracy = move |r: &Row| case(r).map_or(f64::NAN, |c| c.accuracy());
+    let scale = move |r: &Row| case(r).map_or(f64::INFINITY, |c| c.scale());
+    let mut counts: Vec<Counts> = cases
+        .iter()
+        .map(|c| {
+            let rs: Vec<&Row> = s.adaptive.iter().filter(|r| r.scene == c.name()).collect();
+            let mut k = Counts::of(c.name(), &rs, c.scale());
+            k.wrong = rs.iter().filter(|r| misses_tol(r, c.accuracy())).count();
+            k
+        })
+        .filter(|k| k.runs > 0)
+        .collect();
+    let wrong: usize = counts.iter().map(|c| c.wrong).sum();
+    let gross = s.adaptive.iter().filter(|r| is_wrong(r, scale(r))).count();
+    counts.push(Counts {
+        scene: "all".into(),
+        runs: counts.iter().map(|c| c.runs).sum(),
+        ok: counts.iter().map(|c| c.ok).sum(),
+        recovered: 0,
+        wrong,
+        failed: vec![(String::new(), counts.iter().map(Counts::failed_total).sum())],
+    });
+    let mut md = format!(
+        "### Adaptive runs\n\n\
+         The same scenes rerun with error control (`mode = adaptive` in `stability.csv`): \
+         rtol = atol = tol, first step the whole interval (the `h` column), no subdivision \
+         (the controller rejects a step whose Newton solve fails and shrinks it). An adaptive \
+         run should either finish with err_final ≤ 100·tol or stop with a typed error \
+         (`step_size_too_small`, `max_steps_reached`, …). `wrong` here counts the finished \
+         runs with err_final above 100·tol (or above ten times the reference's own error, \
+         where that is larger): **{wrong} of {} adaptive runs** (target 0); {gross} of them \
+         are off by more than half the solution's size.\n\n",
+        s.adaptive.len()
+    );
+    let failed = |c: &Counts| match (c.failed.as_slice(), c.scene == "all") {
+        (_, true) => c.failed_total().to_string(),
+        ([], false) => "0".to_string(),
+        (kinds, false) => {
+            let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k}: {n}")).collect();
+            kinds.join(", ")
+        }
+    };
+    md.push_str(&markdown(
+        &counts,
+        &[
+            col("scene", |c: &Counts| c.scene.clone()),
+            col("runs", |c: &Counts| c.runs.to_string()),
+            col("ok", |c: &Counts| c.ok.to_string()),
+            col("wrong (err > 100·tol)", |c: &Counts| c.wrong.to_string()),
+            col("failed (by kind)", failed),
+        ],
+    ));
+    md.push('\n');
+    md.push_str(&markdown(
+        &s.adaptive,
+        &[
+            col("scene", |r: &Row| format!("`{}`", r.scene)),
+            col("method", |r: &Row| format!("`{}`", r.method)),
+            col("tol", |r: &Row| {
+                format!("{:.0e}", r.tol.unwrap_or(f64::NAN))
+            }),
+            col("outcome", move |r: &Row| {
+                let w = if misses_tol(r, accuracy(r)) {
+                    " (wrong)"
+                } else {
+                    ""
+                };
+                format!("{}{w}", r.outcome)
+            }),
+            col("steps", |r: &Row| r.steps_done.to_string()),
+            col("err_final", |r: &Row| format!("{:.2e}", r.err_final)),
+            col("err/tol", |r: &Row| {
+                format!("{:.2}", r.err_final / r.tol.unwrap_or(f64::NAN))
+            }),
+            col("run time", |r: &Row| fmt_time(r.seconds)),
+        ],
+    ));
     md.push('\n');
     md
 }
