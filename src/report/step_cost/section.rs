@@ -28,8 +28,24 @@ fn fmt_plain(x: Option<f64>) -> String {
 /// The Markdown of the step-cost section.
 pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String {
     let mut md = String::from("## Step cost\n\n");
+    intro(&mut md, s, quick);
+    let paper: Vec<&Row> = s
+        .rows
+        .iter()
+        .filter(|r| r.scene == "coupled_van_der_pol")
+        .collect();
+    paper_table(&mut md, s, &paper);
+    targets_speed(&mut md, &paper);
+    targets_resources(&mut md, s);
+    slimplectic(&mut md, &paper);
+    scaling(&mut md, s, plot);
+    compile_and_memory(&mut md, s);
+    md
+}
+
+fn intro(md: &mut String, s: &Summary, quick: bool) {
     let _ = writeln!(
-        md,
+        *md,
         "Written by `cargo run --release -- step-cost{}` in {:.0} s. Data: `step_cost.csv`. \
          Times are medians over repeats of whole `for_each_step` runs at h = 0.01 from the \
          paper's initial state, divided by the steps; generated (`#[forced_lagrangian]`) and \
@@ -47,11 +63,9 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             ""
         }
     );
-    let paper: Vec<&Row> = s
-        .rows
-        .iter()
-        .filter(|r| r.scene == "coupled_van_der_pol")
-        .collect();
+}
+
+fn paper_table(md: &mut String, s: &Summary, paper: &[&Row]) {
     md.push_str(&markdown(
         paper.iter().copied(),
         &[
@@ -67,12 +81,15 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         ],
     ));
     for r in paper.iter().filter(|r| !r.note.is_empty()) {
-        let _ = writeln!(md, "\n{}: {}", r.method, r.note);
+        let _ = writeln!(*md, "\n{}: {}", r.method, r.note);
     }
     if !s.same_iterations {
         md.push_str("\nNote: the generated and hand-written runs did not take the same number of Newton iterations for every scheme (the kernels differ in the last bits).\n");
     }
+}
 
+/// Targets 1–3 of the issue: the generated/hand-written ratio, lobatto3's step time, Newton.
+fn targets_speed(md: &mut String, paper: &[&Row]) {
     md.push_str(
         "\n### Targets of the issue\n\n| target | goal | measured | verdict |\n|---|---|---|---|\n",
     );
@@ -82,7 +99,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         .max_by(|a, b| a.0.total_cmp(&b.0));
     if let Some((w, m)) = worst {
         let _ = writeln!(
-            md,
+            *md,
             "| 1. generated ÷ hand-written | ≤ 1.5 for every scheme | worst {w:.2} ({m}) | {} |",
             met(w <= 1.5)
         );
@@ -91,7 +108,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     if let Some(t) = l3.and_then(|r| r.generated) {
         let us = t * 1e-3;
         let _ = writeln!(
-            md,
+            *md,
             "| 2. lobatto3 at h = 0.01 | ≤ 1 µs per step | {us:.3} µs per step | {} |",
             met(us <= 1.0)
         );
@@ -106,19 +123,38 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             .filter_map(|r| Some(format!("{} {:.2}", r.method, r.iters?)))
             .collect();
         let _ = writeln!(
-            md,
+            *md,
             "| 3. Newton iterations | ≤ 2.5 per step | worst {it:.2} ({m}); {} | {} |",
             all.join(", "),
             met(it <= 2.5)
         );
     }
+}
+
+/// The peak-RSS marks of the memory stream.
+fn rss_marks(s: &Summary) -> Vec<String> {
+    s.memory
+        .at
+        .iter()
+        .map(|(k, r)| {
+            format!(
+                "{:.0e} steps: {}",
+                *k as f64,
+                r.map_or("n/a".into(), |v| format!("{v} KiB"))
+            )
+        })
+        .collect()
+}
+
+/// Targets 4–7: allocations, scaling, compile time, memory.
+fn targets_resources(md: &mut String, s: &Summary) {
     let allocs: Vec<f64> = s.rows.iter().filter_map(|r| r.allocs).collect();
     if allocs.is_empty() {
         md.push_str("| 4. allocations | 0 per step | not counted (no counting allocator) | – |\n");
     } else {
         let mx = allocs.iter().copied().fold(0.0, f64::max);
         let _ = writeln!(
-            md,
+            *md,
             "| 4. allocations | 0 per step | max {mx} per step over all rows | {} |",
             met(mx == 0.0)
         );
@@ -126,7 +162,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     match &s.exponent {
         Some((e, ns)) => {
             let _ = writeln!(
-                md,
+                *md,
                 "| 5. scaling (spring chain) | ≤ n^1.2 beyond n = 32 | n^{e:.2} (fit over n = {}) | {} |",
                 ns.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", "),
                 met(*e <= 1.2)
@@ -139,7 +175,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     match &s.compile {
         Ok(c) => {
             let _ = writeln!(
-                md,
+                *md,
                 "| 6. compile time | report | 1 model {:.1} s, 10 models {:.1} s (+{:.1} s, {:.1} s per extra model) | reported |",
                 c.one,
                 c.ten,
@@ -148,21 +184,10 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             );
         }
         Err(e) => {
-            let _ = writeln!(md, "| 6. compile time | report | {e} | – |");
+            let _ = writeln!(*md, "| 6. compile time | report | {e} | – |");
         }
     }
-    let rss: Vec<String> = s
-        .memory
-        .at
-        .iter()
-        .map(|(k, r)| {
-            format!(
-                "{:.0e} steps: {}",
-                *k as f64,
-                r.map_or("n/a".into(), |v| format!("{v} KiB"))
-            )
-        })
-        .collect();
+    let rss = rss_marks(s);
     let vals: Vec<u64> = s.memory.at.iter().filter_map(|x| x.1).collect();
     // "Constant": no growth with the steps beyond page-granular noise. The last mark has 100×
     // the steps of the first; even one leaked byte per step would add megabytes.
@@ -172,7 +197,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     };
     let constant = vals.len() == s.memory.at.len() && !vals.is_empty() && growth <= 512;
     let _ = writeln!(
-        md,
+        *md,
         "| 7. memory | peak RSS constant in the steps | {} (growth {growth} KiB from the first to the last mark, tolerance 512 KiB) | {} |",
         rss.join("; "),
         if vals.is_empty() {
@@ -181,7 +206,11 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             met(constant)
         }
     );
+}
 
+/// The comparison with slimplectic's step times quoted in the issue.
+fn slimplectic(md: &mut String, paper: &[&Row]) {
+    let l3 = paper.iter().find(|r| r.method == "lobatto3");
     if let Some(t) = l3.and_then(|r| r.generated) {
         let us = t * 1e-3;
         let l5 = paper
@@ -190,7 +219,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             .and_then(|r| r.generated)
             .map(|t| t * 1e-3);
         let _ = write!(
-            md,
+            *md,
             "\n**Against slimplectic.** The issue quotes 260–300 µs per step for slimplectic's \
              order-4 scheme and 580–770 µs for order 8 on the same problem. lobatto3 (order 4) \
              takes {us:.3} µs here: {:.0}–{:.0}× faster.",
@@ -199,7 +228,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         );
         if let Some(u5) = l5 {
             let _ = write!(
-                md,
+                *md,
                 " lobatto5 (order 8) takes {u5:.3} µs: {:.0}–{:.0}× faster.",
                 580.0 / u5,
                 770.0 / u5
@@ -207,7 +236,9 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         }
         md.push('\n');
     }
+}
 
+fn scaling(md: &mut String, s: &Summary, plot: Option<&str>) {
     md.push_str("\n### Scaling: damped spring chain\n\n");
     md.push_str(
         "`SpringChain<N>` (nearest-neighbour springs `kΔ²/2 + βΔ⁴/4`, damping `−cv`) with \
@@ -236,7 +267,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     ));
     if let Some((e, _)) = &s.exponent {
         let _ = writeln!(
-            md,
+            *md,
             "\nFitted growth beyond n = 32: time per step ∝ n^{e:.2}, against the target n^1.2: {}. \
              Meeting it needs a block-banded or sparse Jacobian and a sparse LU (the issue \
              suggests faer `sp_lu`), which this dense runtime does not have, and first of all a kernel for array models \
@@ -246,14 +277,17 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         );
     }
     if let Some(p) = plot {
-        let _ = writeln!(md, "\n![time per step against n]({p})");
+        let _ = writeln!(*md, "\n![time per step against n]({p})");
     }
+}
 
+fn compile_and_memory(md: &mut String, s: &Summary) {
+    let rss = rss_marks(s);
     md.push_str("\n### Compile time and memory\n\n");
     match &s.compile {
         Ok(c) => {
             let _ = writeln!(
-                md,
+                *md,
                 "Two throw-away crates under `target/step_cost_compile/` depend on `forced-vi` by \
                  path: one with one `#[forced_lagrangian]` model, one with ten (the report's \
                  models plus a Duffing oscillator, a pendulum and a 3-dof cubic coupling), each \
@@ -268,11 +302,11 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             );
         }
         Err(e) => {
-            let _ = writeln!(md, "Compile time: {e}.\n");
+            let _ = writeln!(*md, "Compile time: {e}.\n");
         }
     }
     let _ = writeln!(
-        md,
+        *md,
         "Memory: {} steps of the paper model with {} streamed through `for_each_step` in \
          {:.1} s; peak RSS (VmHWM) before the run {}, then {}. The stream runs first, before \
          the large chain sizes, so that their memory does not mask it.",
@@ -284,5 +318,4 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
             .map_or("n/a".into(), |v| format!("{v} KiB")),
         rss.join(", ")
     );
-    md
 }
