@@ -123,6 +123,32 @@ pub enum BaselineError {
     },
 }
 
+/// `∂L_v/∂t` at `(t, q, v)`: zero for an autonomous model, else exact, by a hyper-dual
+/// number over `t` and `v`.
+fn lagrangian_v_dt<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    t: f64,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+) -> SVector<f64, N> {
+    use num_dual::{partial_hessian, HyperDualSVec64};
+    if !M::STRUCTURE.uses_time {
+        return SVector::zeros();
+    }
+    let qa: [f64; N] = (*q).into();
+    let (_, _, _, h) = partial_hessian(
+        |(tt, vv): (
+            SVector<HyperDualSVec64<1, N>, 1>,
+            SVector<HyperDualSVec64<1, N>, N>,
+        )| {
+            let va: [HyperDualSVec64<1, N>; N] = vv.into();
+            model.lagrangian_at(tt[0], &forced_vi::lift(&qa), &va)
+        },
+        (&SVector::from([t]), v),
+    );
+    h.transpose().column(0).into_owned()
+}
+
 /// The first-order form `y' = f(y)` of a forced Lagrangian system (see the module docs).
 #[derive(Clone, Debug)]
 pub struct OdeSystem<'m, M, const N: usize> {
@@ -180,28 +206,33 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> OdeSystem<'m, M, N> {
         y
     }
 
-    /// `dy = f(y)`. A singular mass matrix gives NaN, which the solvers reject.
-    pub fn rhs(&self, y: &[f64], dy: &mut [f64]) {
+    /// `dy = f(t, y)`. A singular mass matrix gives NaN, which the solvers reject.
+    ///
+    /// The accelerations solve `E a = L_q + F − C v − ∂L_v/∂t`; the last term is zero for an
+    /// autonomous model. The work component is `W' = F · v − ∂L/∂t`, so that
+    /// `E − E0 − W` is the energy balance of a driven model too (DESIGN §7).
+    pub fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
         let q = SVector::<f64, N>::from_fn(|i, _| y[i]);
         let v = SVector::<f64, N>::from_fn(|i, _| y[N + i]);
         let accel = match &self.mass_inverse {
-            Some(inv) => Some(inv * self.model.node_gradient(&q, &v).fq),
-            None => {
-                let j = self.model.node_jacobian(&q, &v);
-                solve_small(&j.e, &(j.grad.fq - j.c * v)).map(|(a, _)| a)
+            Some(inv) if !M::STRUCTURE.uses_time => Some(inv * self.model.node_gradient(&q, &v).fq),
+            _ => {
+                let j = self.model.node_jacobian_at(t, &q, &v);
+                let lv_t = lagrangian_v_dt(self.model, t, &q, &v);
+                solve_small(&j.e, &(j.grad.fq - j.c * v - lv_t)).map(|(a, _)| a)
             }
         };
         let accel = accel.unwrap_or_else(|| SVector::repeat(f64::NAN));
         dy[..N].copy_from_slice(v.as_slice());
         dy[N..2 * N].copy_from_slice(accel.as_slice());
         if self.with_work {
-            let f = SVector::from(self.model.force::<f64>(&q.into(), &v.into()));
-            dy[2 * N] = f.dot(&v);
+            let f = SVector::from(self.model.force_at::<f64>(t, &q.into(), &v.into()));
+            dy[2 * N] = f.dot(&v) - self.model.lagrangian_dt(t, &q, &v);
         }
     }
 
-    /// `out = J(y) w` by a forward difference of [`rhs`](Self::rhs).
-    pub fn jacobian_times(&self, y: &[f64], w: &[f64], out: &mut [f64]) {
+    /// `out = J(t, y) w` by a forward difference of [`rhs`](Self::rhs).
+    pub fn jacobian_times(&self, t: f64, y: &[f64], w: &[f64], out: &mut [f64]) {
         let wmax = w.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         if wmax == 0.0 {
             out.fill(0.0);
@@ -211,19 +242,20 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> OdeSystem<'m, M, N> {
         let delta = f64::EPSILON.sqrt() * ymax / wmax;
         let shifted: Vec<f64> = y.iter().zip(w).map(|(a, b)| a + delta * b).collect();
         let mut f0 = vec![0.0; y.len()];
-        self.rhs(y, &mut f0);
-        self.rhs(&shifted, out);
+        self.rhs(t, y, &mut f0);
+        self.rhs(t, &shifted, out);
         for (o, f) in out.iter_mut().zip(&f0) {
             *o = (*o - f) / delta;
         }
     }
 
-    /// The momentum `p = L_v(q, v)` and energy `E = v · L_v − L` of a state `y`.
-    pub fn momentum_energy(&self, y: &[f64]) -> (SVector<f64, N>, f64) {
+    /// The momentum `p = L_v(t, q, v)` and energy `E = v · L_v − L` of a state `y` at `t`.
+    pub fn momentum_energy(&self, t: f64, y: &[f64]) -> (SVector<f64, N>, f64) {
         let q = SVector::<f64, N>::from_fn(|i, _| y[i]);
         let v = SVector::<f64, N>::from_fn(|i, _| y[N + i]);
-        let p = self.model.node_gradient(&q, &v).lv;
-        (p, self.model.energy(&q, &v))
+        let p = self.model.node_gradient_at(t, &q, &v).lv;
+        let l = self.model.lagrangian_at::<f64>(t, &q.into(), &v.into());
+        (p, v.dot(&p) - l)
     }
 }
 
@@ -278,8 +310,8 @@ struct Dop853System<'a, 'm, M, const N: usize>(&'a OdeSystem<'m, M, N>);
 impl<M: ForcedLagrangian<N>, const N: usize> ode_solvers::System<f64, ode_solvers::DVector<f64>>
     for Dop853System<'_, '_, M, N>
 {
-    fn system(&self, _t: f64, y: &ode_solvers::DVector<f64>, dy: &mut ode_solvers::DVector<f64>) {
-        self.0.rhs(y.as_slice(), dy.as_mut_slice());
+    fn system(&self, t: f64, y: &ode_solvers::DVector<f64>, dy: &mut ode_solvers::DVector<f64>) {
+        self.0.rhs(t, y.as_slice(), dy.as_mut_slice());
     }
 }
 
@@ -355,9 +387,9 @@ fn diffsol_run<M: ForcedLagrangian<N>, const N: usize>(
         .rtol(tol)
         .atol([tol])
         .rhs_implicit(
-            |y: &[f64], _p: &[f64], _t: f64, dy: &mut [f64]| system.rhs(y, dy),
-            |y: &[f64], _p: &[f64], _t: f64, w: &[f64], out: &mut [f64]| {
-                system.jacobian_times(y, w, out)
+            |y: &[f64], _p: &[f64], t: f64, dy: &mut [f64]| system.rhs(t, y, dy),
+            |y: &[f64], _p: &[f64], t: f64, w: &[f64], out: &mut [f64]| {
+                system.jacobian_times(t, y, w, out)
             },
         )
         .init(
@@ -459,7 +491,7 @@ mod tests {
         let sys = OdeSystem::new(&Linear, &[0.0; 2], &[0.0; 2]).with_work();
         let y = [0.3, -0.2, 0.5, 0.1, 0.0];
         let mut dy = [0.0; 5];
-        sys.rhs(&y, &mut dy);
+        sys.rhs(0.0, &y, &mut dy);
         let mat = |a: [[f64; 2]; 2]| SMatrix::<f64, 2, 2>::from_fn(|i, j| a[i][j]);
         let (q, v) = (SVector::from([y[0], y[1]]), SVector::from([y[2], y[3]]));
         let residual = mat(M) * SVector::from([dy[2], dy[3]]) + mat(K) * q + mat(D) * v;
@@ -477,7 +509,7 @@ mod tests {
         let y = [0.3, -0.2, 0.5, 0.1];
         let w = [0.0, 0.0, 1.0, 0.0];
         let mut out = [0.0; 4];
-        sys.jacobian_times(&y, &w, &mut out);
+        sys.jacobian_times(0.0, &y, &w, &mut out);
         // ∂(q')/∂v₁ = e₁; ∂(v')/∂v₁ = −M⁻¹ D e₁.
         let mat = |a: [[f64; 2]; 2]| SMatrix::<f64, 2, 2>::from_fn(|i, j| a[i][j]);
         let expect = -(mat(M).try_inverse().unwrap() * mat(D))

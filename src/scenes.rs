@@ -15,7 +15,10 @@
 use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme};
 
 use crate::baselines::{self, Baseline, BaselineError, OdeSystem};
-use crate::models::{CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, KeplerDrag};
+use crate::models::{
+    CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing, KapitzaPendulum,
+    KeplerDrag,
+};
 use crate::reference::Reference;
 
 /// The reference state of one member at the final time.
@@ -329,7 +332,7 @@ where
         let sys = OdeSystem::new(&self.model, &q0, &v0);
         let y0 = sys.initial_state(&q0, &v0);
         let run = baselines::solve(&sys, solver, tol, &y0, self.t_final, |_, _| {})?;
-        let (p, energy) = sys.momentum_energy(&run.y);
+        let (p, energy) = sys.momentum_energy(run.t, &run.y);
         Ok(Outcome {
             end: FinalState {
                 q: run.y[..N].to_vec(),
@@ -381,19 +384,19 @@ where
         let (q0, v0) = self.start(0)?;
         let sys = OdeSystem::new(&self.model, &q0, &v0).with_work();
         let y0 = sys.initial_state(&q0, &v0);
-        let (_, e0) = sys.momentum_energy(&y0);
+        let (_, e0) = sys.momentum_energy(0.0, &y0);
         let mut out = BalanceSeries::default();
         let mut sampler = Sampler::new(t_final, samples);
-        let balance = |y: &[f64]| sys.momentum_energy(y).1 - e0 - y[2 * N];
+        let balance = |t: f64, y: &[f64]| sys.momentum_energy(t, y).1 - e0 - y[2 * N];
         let run = baselines::solve(&sys, solver, tol, &y0, t_final, |t, y| {
             if sampler.take(t) {
                 out.t.push(t);
-                out.balance.push(balance(y));
+                out.balance.push(balance(t, y));
             }
         })?;
         if out.t.last() != Some(&run.t) {
             out.t.push(run.t);
-            out.balance.push(balance(&run.y));
+            out.balance.push(balance(run.t, &run.y));
         }
         out.steps = run.steps;
         out.newton_iterations = run.newton_iterations;
@@ -441,6 +444,16 @@ pub fn all() -> Result<Vec<Box<dyn Scene>>, SceneError> {
             "kepler_drag",
             KeplerDrag::DEFAULT,
             "Kepler orbit (μ = 1) with linear drag γ = 0.01: non-polynomial potential"
+        ),
+        scene!(
+            "driven_duffing",
+            DrivenDuffing::CHAOTIC,
+            "Driven Duffing oscillator in its chaotic regime, (δ, α, β, γ, ω) = (0.3, −1, 1, 0.5, 1.2), 5 periods: F(t, x, ẋ)"
+        ),
+        scene!(
+            "kapitza_pendulum",
+            KapitzaPendulum::UPRIGHT,
+            "Kapitza's pendulum held upright by a vibrating pivot (a = 0.1, Ω = 50) with joint friction: L(t, θ, θ̇)"
         ),
     ]
     .into_iter()

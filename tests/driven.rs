@@ -1,6 +1,7 @@
 //! Driven systems, `L(t, q, v)` and `F(t, q, v)` (DESIGN §7): fitted orders 2/4/6/8 in q, p
-//! and the energy balance `E − E0 − W + ∫L_t` against independent references (scipy DOP853
-//! at 1e-13, cross-checked with Radau: `scripts/driven_reference.py`).
+//! and the energy balance `E − E0 − W + ∫L_t` against independent references (mpmath Taylor
+//! series at 25 digits, cross-checked with scipy DOP853 and Radau at 1e-13:
+//! `scripts/driven_reference.py`).
 //! `cargo test --release --test driven`.
 
 use forced_vi::prelude::*;
@@ -42,7 +43,8 @@ fn check(name: &str, s: usize, errs: &[(f64, [f64; 3])], energy_scale: f64) {
     let expected = (2 * s - 2) as f64;
     for (k, what) in ["q", "p", "energy balance"].iter().enumerate() {
         let pts: Vec<(f64, f64)> = errs.iter().map(|(h, e)| (*h, e[k])).collect();
-        // q and p: the references are good to ~5e-12, so the fit uses errors above 1e-10.
+        // q and p: the fit uses errors above 1e-10; below, the chaotic Duffing run amplifies
+        // the round-off of its ~10⁵ steps.
         // The balance needs no reference: its floor is the round-off of the energy's terms
         // (the fit's own rule, scaled by the energy).
         let (pts, scale) = if k < 2 {
@@ -158,4 +160,117 @@ fn driven_time_flag_is_checked() {
         .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
         .unwrap_err();
     assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
+}
+
+mod macro_models {
+    use forced_vi::prelude::*;
+
+    /// The driven Duffing oscillator, written with the macro: `t` in the force.
+    #[forced_lagrangian(
+        coordinates(x),
+        lagrangian = x_dot * x_dot / 2 - alpha * x * x / 2 - beta * x.powi(4) / 4,
+        force(x = -delta * x_dot + gamma * (omega * t).cos()),
+    )]
+    pub struct MacroDuffing {
+        pub delta: f64,
+        pub alpha: f64,
+        pub beta: f64,
+        pub gamma: f64,
+        pub omega: f64,
+    }
+
+    /// Kapitza's pendulum, written with the macro: `t` in the Lagrangian.
+    #[forced_lagrangian(
+        coordinates(th),
+        lagrangian = {
+            let ys = a * (big_omega * t).cos();
+            let yd = -a * big_omega * (big_omega * t).sin();
+            0.5 * m * (l * l * th_dot * th_dot + 2 * l * th.sin() * th_dot * yd + yd * yd)
+                - m * g * (ys - l * th.cos())
+        },
+        force(th = -c * th_dot),
+    )]
+    pub struct MacroKapitza {
+        pub m: f64,
+        pub l: f64,
+        pub g: f64,
+        pub a: f64,
+        pub big_omega: f64,
+        pub c: f64,
+    }
+
+    /// An autonomous model: no `t`.
+    #[forced_lagrangian(
+        coordinates(x),
+        lagrangian = x_dot * x_dot / 2 - x * x / 2,
+        force(x = -c * x_dot),
+    )]
+    pub struct Damped {
+        pub c: f64,
+    }
+}
+
+/// Runs both models from the same state with lobatto2…4 and compares every step.
+fn same_trajectory<A: ForcedLagrangian<1>, B: ForcedLagrangian<1>>(
+    a: &A,
+    b: &B,
+    h: f64,
+    t_final: f64,
+    start: ([f64; 1], [f64; 1]),
+) {
+    for s in [2, 3, 4] {
+        let ra = Integrator::new(a, Scheme::lobatto(s).unwrap(), h)
+            .unwrap()
+            .run(InitialState::from_velocity(start.0, start.1), t_final)
+            .unwrap();
+        let rb = Integrator::new(b, Scheme::lobatto(s).unwrap(), h)
+            .unwrap()
+            .run(InitialState::from_velocity(start.0, start.1), t_final)
+            .unwrap();
+        assert_eq!(ra.records.len(), rb.records.len());
+        for (x, y) in ra.records.iter().zip(&rb.records) {
+            assert_eq!(x.t, y.t);
+            let d = (x.q[0] - y.q[0])
+                .abs()
+                .max((x.p[0] - y.p[0]).abs())
+                .max((x.energy_balance - y.energy_balance).abs());
+            assert!(d < 1e-12, "lobatto{s} at t = {}: {d:e}", x.t);
+        }
+    }
+}
+
+/// `t` in `#[forced_lagrangian]` expressions: the macro's driven Duffing oscillator and
+/// Kapitza pendulum follow the hand-written models step by step, and say they use time.
+#[test]
+fn driven_macro_matches_hand_written() {
+    use macro_models::{Damped, MacroDuffing, MacroKapitza};
+    let d = DrivenDuffing::CHAOTIC;
+    let md = MacroDuffing {
+        delta: d.delta,
+        alpha: d.alpha,
+        beta: d.beta,
+        gamma: d.gamma,
+        omega: d.omega,
+    };
+    let k = KapitzaPendulum::UPRIGHT;
+    let mk = MacroKapitza {
+        m: k.m,
+        l: k.l,
+        g: k.g,
+        a: k.a,
+        big_omega: k.big_omega,
+        c: k.c,
+    };
+    assert!(<MacroDuffing as ForcedLagrangian<1>>::STRUCTURE.uses_time);
+    assert!(<MacroKapitza as ForcedLagrangian<1>>::STRUCTURE.uses_time);
+    assert!(!<MacroKapitza as ForcedLagrangian<1>>::STRUCTURE.constant_mass);
+    assert!(!<Damped as ForcedLagrangian<1>>::STRUCTURE.uses_time);
+    same_trajectory(&md, &d, 0.05, 3.0, ([1.0], [0.0]));
+    same_trajectory(&mk, &k, 0.002, 0.5, ([std::f64::consts::PI - 0.3], [0.0]));
+    // The generated `doubled_lagrangian` carries the time.
+    let (q, v, qq, vv) = ([0.3], [1.0], [0.1], [-0.7]);
+    let a = mk.doubled_lagrangian::<f64>(0.7, &q, &v, &qq, &vv);
+    let b = forced_vi::doubled::doubled_lagrangian_at(&k, 0.7, &q, &v, &qq, &vv);
+    assert!((a - b).abs() < 1e-12 * a.abs().max(1.0), "{a} {b}");
+    assert!((a + mk.doubled_lagrangian::<f64>(0.7, &qq, &vv, &q, &v)).abs() < 1e-12);
 }
