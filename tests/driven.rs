@@ -261,10 +261,14 @@ fn driven_macro_matches_hand_written() {
         big_omega: k.big_omega,
         c: k.c,
     };
-    assert!(<MacroDuffing as ForcedLagrangian<1>>::STRUCTURE.uses_time);
-    assert!(<MacroKapitza as ForcedLagrangian<1>>::STRUCTURE.uses_time);
-    assert!(!<MacroKapitza as ForcedLagrangian<1>>::STRUCTURE.constant_mass);
-    assert!(!<Damped as ForcedLagrangian<1>>::STRUCTURE.uses_time);
+    let (sd, sk) = (
+        <MacroDuffing as ForcedLagrangian<1>>::STRUCTURE,
+        <MacroKapitza as ForcedLagrangian<1>>::STRUCTURE,
+    );
+    assert!(sd.uses_time && sd.constant_mass && sd.force_uses_velocity);
+    assert!(sk.uses_time && !sk.constant_mass);
+    let autonomous = <Damped as ForcedLagrangian<1>>::STRUCTURE;
+    assert!(!autonomous.uses_time && autonomous.constant_mass);
     same_trajectory(&md, &d, 0.05, 3.0, ([1.0], [0.0]));
     same_trajectory(&mk, &k, 0.002, 0.5, ([std::f64::consts::PI - 0.3], [0.0]));
     // The generated `doubled_lagrangian` carries the time.

@@ -324,8 +324,8 @@ fn array_forms_with_literal_lengths() {
 fn doubled_lagrangian_is_odd_and_matches_the_runtime() {
     let m = CoupledVanDerPol::PAPER;
     let (q, v, qq, vv) = ([0.3, -0.2], [1.0, 0.5], [0.1, 0.4], [-0.7, 0.2]);
-    let a = m.doubled_lagrangian::<f64>(&q, &v, &qq, &vv);
-    let b = m.doubled_lagrangian::<f64>(&qq, &vv, &q, &v);
+    let a = m.doubled_lagrangian::<f64>(0.0, &q, &v, &qq, &vv);
+    let b = m.doubled_lagrangian::<f64>(0.0, &qq, &vv, &q, &v);
     assert!((a + b).abs() < 1e-14);
     assert_eq!(a, doubled::doubled_lagrangian(&m, &q, &v, &qq, &vv));
 }

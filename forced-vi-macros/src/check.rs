@@ -10,8 +10,8 @@ use syn::{Expr, Ident, Type};
 use crate::ast::{Coord, Force, Model};
 use crate::ctxt::Ctxt;
 use crate::lower::{
-    compact, reserved, reserved_message, Env, Group, Idx, IntRange, Kind, Len, Lowered, Lowerer,
-    Var,
+    compact, reserved, reserved_message, time_message, Env, Group, Idx, IntRange, Kind, Len,
+    Lowered, Lowerer, Var, TIME,
 };
 use crate::poly::{Atoms, Extractor, Poly};
 
@@ -32,6 +32,8 @@ pub struct Checked<'a> {
     /// Opaque constants used by the polynomials.
     pub atoms: Atoms,
     pub constant_mass: bool,
+    /// The Lagrangian or the force names the time `t`.
+    pub uses_time: bool,
     /// Some index of the Lagrangian or the force is checked at run time: generate
     /// `check_model`.
     pub checked_index: bool,
@@ -122,6 +124,10 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         let _ = quiet.check();
         if l.kind != Kind::Dual || l.uses.is_empty() {
             continue;
+        }
+        // A term with a velocity and the time may make the mass matrix depend on `t`.
+        if l.names.contains(TIME) && l.uses.iter().any(|u| u.vel) {
+            constant_mass = false;
         }
         let poly = if symbolic { extractor.poly(e) } else { None };
         let poly = match (poly, negative) {
@@ -214,6 +220,10 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         }
     });
     let atoms = extractor.atoms;
+    let uses_time = lowered.names.contains(TIME)
+        || force
+            .as_ref()
+            .is_some_and(|f| f.fns.iter().any(|func| func.lowered.names.contains(TIME)));
     let checked_index = l_checked
         || force
             .as_ref()
@@ -228,6 +238,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         force,
         atoms,
         constant_mass,
+        uses_time,
         checked_index,
     })
 }
@@ -276,6 +287,9 @@ fn check_fields(cx: &Ctxt, model: &Model) {
         if reserved(&name) {
             cx.error_spanned_by(&p.ident, reserved_message(&name));
         }
+        if name == TIME {
+            cx.error_spanned_by(&p.ident, time_message("parameter"));
+        }
         if !is_f64(&p.ty) {
             let ty = &p.ty;
             cx.error_spanned_by(
@@ -304,6 +318,9 @@ fn check_generics(cx: &Ctxt, model: &Model) -> Vec<Ident> {
                 let name = c.ident.to_string();
                 if reserved(&name) {
                     cx.error_spanned_by(&c.ident, reserved_message(&name));
+                }
+                if name == TIME {
+                    cx.error_spanned_by(&c.ident, time_message("const parameter"));
                 }
                 if matches!(&c.ty, Type::Path(p) if p.path.is_ident("usize")) {
                     out.push(c.ident.clone());
@@ -369,6 +386,10 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
         if reserved(&name) {
             cx.error_spanned_by(&c.name, reserved_message(&name));
             continue;
+        }
+        if name == TIME {
+            // Still declared, so that `t_dot` resolves: one error, at this token.
+            cx.error_spanned_by(&c.name, time_message("coordinate"));
         }
         if seen.contains(&name) {
             cx.error_spanned_by(&c.name, format!("duplicate coordinate `{name}`"));

@@ -4,6 +4,9 @@
 //! - `impl ForcedLagrangian<N>`: `lagrangian`, `force` (only with a force), `STRUCTURE`,
 //!   `coordinate_names`, `check_parameters`, and the specialised kernels `node_gradient`,
 //!   `node_jacobian` and `mass_matrix`;
+//! - for a driven model (one that names `t`): `lagrangian_at` and `force_at` instead, with
+//!   `lagrangian`/`force` their values at `t = 0`, `STRUCTURE.uses_time`, and no
+//!   specialised kernels (the runtime's general ones take the time);
 //! - an inherent `doubled_lagrangian` and one hidden helper per non-polynomial term of `L`
 //!   and per force entry.
 //!
@@ -18,7 +21,7 @@ use quote::{format_ident, quote, quote_spanned};
 use syn::Ident;
 
 use crate::check::{slots, Checked};
-use crate::lower::{dual_ident, Env, Idx, Len, Lowered, Var};
+use crate::lower::{dual_ident, Env, Idx, Len, Lowered, Var, TIME};
 use crate::poly::Poly;
 
 fn fvi() -> TokenStream {
@@ -83,22 +86,54 @@ pub fn generate(c: &Checked) -> TokenStream {
     let dq = format_ident!("__fvi_q");
     let dv = format_ident!("__fvi_v");
     let d_ty = quote!(#d);
+    let timed = c.uses_time;
+    let dt = format_ident!("__fvi_t");
+    let time = Ident::new(TIME, Span::call_site());
+    // In a driven model, `t` bound from the `__fvi_t` argument where an expression uses it.
+    let time_binding = |names: &BTreeSet<String>| -> TokenStream {
+        if names.contains(TIME) {
+            quote!(let #time: #d = #dt;)
+        } else {
+            quote!(let _ = #dt;)
+        }
+    };
+    let time_param = timed.then(|| quote!(#dt: #d,));
+    let time_arg = timed.then(|| quote!(#dt,));
 
-    // L(q, v), generic.
+    // L(q, v), generic; for a driven model L(t, q, v), with `lagrangian` its value at t = 0.
     let l_bind = bindings(&c.env, n, &c.lagrangian.names, &dq, &dv, &d_ty);
     let l_body = lowered_dual(&c.lagrangian);
-    let lagrangian = quote! {
-        #[inline]
-        #[allow(unused_braces)]
-        fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
-            #l_bind
-            #l_body
+    let lagrangian = if timed {
+        let t_bind = time_binding(&c.lagrangian.names);
+        quote! {
+            #[inline]
+            #[allow(unused_braces)]
+            fn lagrangian_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                #t_bind
+                #l_bind
+                #l_body
+            }
+            #[inline]
+            fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                <Self as #fvi::ForcedLagrangian<#n>>::lagrangian_at(self, #d::from(0.0), #dq, #dv)
+            }
+        }
+    } else {
+        quote! {
+            #[inline]
+            #[allow(unused_braces)]
+            fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                #l_bind
+                #l_body
+            }
         }
     };
 
     // Helpers: non-polynomial terms and force entries.
     let mut helpers = TokenStream::new();
-    for (k, t) in c.dual_terms.iter().enumerate() {
+    // A driven model uses the runtime's general kernels, which call no term helper.
+    let dual_terms: &[crate::check::Term] = if timed { &[] } else { &c.dual_terms };
+    for (k, t) in dual_terms.iter().enumerate() {
         let name = format_ident!("__fvi_l{}", k);
         let bind = bindings(&c.env, n, &t.lowered.names, &dq, &dv, &d_ty);
         let body = lowered_dual(&t.lowered);
@@ -117,13 +152,15 @@ pub fn generate(c: &Checked) -> TokenStream {
         for (k, f) in force.fns.iter().enumerate() {
             let name = format_ident!("__fvi_f{}", k);
             let bind = bindings(&c.env, n, &f.lowered.names, &dq, &dv, &d_ty);
+            let t_bind = timed.then(|| time_binding(&f.lowered.names));
             let body = lowered_dual(&f.lowered);
             let index = f.index.as_ref().map(|i| quote!(, #i: usize));
             helpers.extend(quote! {
                 #[doc(hidden)]
                 #[inline(always)]
                 #[allow(unused_braces)]
-                fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n] #index) -> #d {
+                fn #name<#d: #scalar_bound>(&self, #time_param #dq: &[#d; #n], #dv: &[#d; #n] #index) -> #d {
+                    #t_bind
                     #bind
                     #body
                 }
@@ -137,19 +174,33 @@ pub fn generate(c: &Checked) -> TokenStream {
                         let i = lit(i);
                         quote!(, #i)
                     });
-                    quote!(self.#name(#dq, #dv #index))
+                    quote!(self.#name(#time_arg #dq, #dv #index))
                 });
                 quote!([#(#calls),*])
             }
             Len::Param(_) => {
-                quote!(::core::array::from_fn(|__fvi_k| self.__fvi_f0(#dq, #dv, __fvi_k)))
+                quote!(::core::array::from_fn(|__fvi_k| self.__fvi_f0(#time_arg #dq, #dv, __fvi_k)))
             }
         };
-        force_method = quote! {
-            #[inline]
-            #[allow(unused_braces)]
-            fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
-                #body
+        force_method = if timed {
+            quote! {
+                #[inline]
+                #[allow(unused_braces)]
+                fn force_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    #body
+                }
+                #[inline]
+                fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    <Self as #fvi::ForcedLagrangian<#n>>::force_at(self, #d::from(0.0), #dq, #dv)
+                }
+            }
+        } else {
+            quote! {
+                #[inline]
+                #[allow(unused_braces)]
+                fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    #body
+                }
             }
         };
     }
@@ -162,10 +213,18 @@ pub fn generate(c: &Checked) -> TokenStream {
         let s = p.to_string();
         quote!(if !self.#p.is_finite() { return ::core::result::Result::Err(#s); })
     });
-    let (kernels, stack) = kernels(c);
-    let stack_bytes = stack
-        .into_iter()
-        .reduce(|a, b| quote!(#fvi::max_usize(#a, #b)));
+    // A driven model keeps the runtime's general kernels (they take `t`), and their stack
+    // bound; an autonomous one gets the specialised kernels.
+    let kernels_and_stack = (!timed).then(|| {
+        let (kernels, stack) = kernels(c);
+        let stack_bytes = stack
+            .into_iter()
+            .reduce(|a, b| quote!(#fvi::max_usize(#a, #b)));
+        quote! {
+            const KERNEL_STACK_BYTES: usize = #stack_bytes;
+            #kernels
+        }
+    });
     let check_model = c.checked_index.then(|| {
         let force = c.force.as_ref().map(|_| {
             quote!(let _ = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &__fvi_z, &__fvi_z);)
@@ -199,35 +258,36 @@ pub fn generate(c: &Checked) -> TokenStream {
                 has_force: #has_force,
                 force_uses_velocity: #force_uses_velocity,
                 constant_mass: #constant_mass,
-                uses_time: false,
+                uses_time: #timed,
             };
             fn coordinate_names(&self) -> [&'static str; #n] {
                 #names
             }
             #lagrangian
             #force_method
-            const KERNEL_STACK_BYTES: usize = #stack_bytes;
             fn check_parameters(&self) -> ::core::result::Result<(), &'static str> {
                 #(#checks)*
                 ::core::result::Result::Ok(())
             }
             #check_model
-            #kernels
+            #kernels_and_stack
         }
 
         #[automatically_derived]
         impl #ig #ident #tg #wc {
-            /// Galley's doubled Lagrangian `Λ(q, v, Q, V) = L(Q, V) − L(q, v)
-            /// + ½ (F(q, v) + F(Q, V)) · (Q − q)` of this model.
+            /// Galley's doubled Lagrangian `Λ(t, q, v, Q, V) = L(t, Q, V) − L(t, q, v)
+            /// + ½ (F(t, q, v) + F(t, Q, V)) · (Q − q)` of this model (`t` is ignored by an
+            /// autonomous model).
             #[allow(dead_code)]
             pub fn doubled_lagrangian<#d: #scalar_bound>(
                 &self,
+                t: #d,
                 q: &[#d; #n],
                 v: &[#d; #n],
                 big_q: &[#d; #n],
                 big_v: &[#d; #n],
             ) -> #d {
-                #fvi::doubled::doubled_lagrangian(self, q, v, big_q, big_v)
+                #fvi::doubled::doubled_lagrangian_at(self, t, q, v, big_q, big_v)
             }
             #helpers
         }

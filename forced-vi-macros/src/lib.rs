@@ -89,4 +89,67 @@ mod tests {
         assert!(!out.contains("term_hessian"));
         assert!(!out.contains("force_row"));
     }
+
+    fn expand(args: proc_macro2::TokenStream) -> String {
+        super::entry(
+            args,
+            quote!(
+                struct M {
+                    k: f64,
+                    w: f64,
+                }
+            ),
+        )
+        .to_string()
+    }
+
+    #[test]
+    fn a_model_that_names_t_is_driven() {
+        // `t` in the force: `_at` methods, `uses_time`, the runtime's general kernels.
+        let out = expand(quote!(
+            coordinates(x),
+            lagrangian = x_dot * x_dot / 2 - k * x * x / 2,
+            force(x = (w * t).cos()),
+        ));
+        assert!(!out.contains("compile_error"), "{out}");
+        assert!(out.contains("uses_time : true"));
+        assert!(out.contains("fn force_at") && out.contains("fn lagrangian_at"));
+        assert!(!out.contains("fn node_gradient") && !out.contains("KERNEL_STACK_BYTES"));
+        // The mass matrix stays constant when only the potential depends on t.
+        assert!(out.contains("constant_mass : true"));
+        // Without t: today's code.
+        let out = expand(quote!(
+            coordinates(x),
+            lagrangian = x_dot * x_dot / 2 - k * x * x / 2,
+            force(x = -w * x_dot),
+        ));
+        assert!(out.contains("uses_time : false") && out.contains("fn node_gradient"));
+        assert!(!out.contains("fn force_at") && !out.contains("fn lagrangian_at"));
+    }
+
+    #[test]
+    fn a_mass_that_depends_on_t_is_not_constant() {
+        for l in [
+            quote!(lagrangian = (1.0 + k * t) * x_dot * x_dot / 2 - x * x / 2),
+            quote!(
+                lagrangian = {
+                    let m = 1.0 + (w * t).sin() / 2;
+                    m * x_dot * x_dot
+                }
+            ),
+            quote!(
+                lagrangian = if t > 1.0 {
+                    x_dot * x_dot
+                } else {
+                    2 * x_dot * x_dot
+                }
+            ),
+            quote!(lagrangian = x_dot * x_dot / 2 + t * x_dot * x_dot),
+        ] {
+            let out = expand(quote!(coordinates(x), #l));
+            assert!(!out.contains("compile_error"), "{out}");
+            assert!(out.contains("uses_time : true"), "{l}");
+            assert!(out.contains("constant_mass : false"), "{l}");
+        }
+    }
 }

@@ -12,10 +12,9 @@
 //!
 //! Names are resolved here too, so an unknown identifier is reported at its own token.
 //!
-//! Room for time-dependent forcing `F(t, q, v)`: time would be one more resolvable name
-//! (a dual-valued variable with its own [`Var`] flavour and degree), bound from a `t`
-//! argument of the generated force helpers; the uses/degree analysis and the kernels' slot
-//! machinery need no other change, and a force that does not name `t` keeps today's code.
+//! The time `t` is one more resolvable name: a `__D` value with no uses and degree 0 in `q`
+//! and `v` (like a parameter), recorded in `names` so that `check` knows the model is
+//! driven. A model that never names `t` keeps today's code.
 
 use std::cell::Cell;
 use std::collections::{BTreeSet, HashMap};
@@ -27,6 +26,14 @@ use syn::spanned::Spanned;
 use syn::{BinOp, Expr, Ident, Lit, Pat, Stmt, UnOp};
 
 use crate::ctxt::Ctxt;
+
+/// The name of the time in model expressions.
+pub const TIME: &str = "t";
+
+/// The message for a model name (coordinate, parameter, const parameter) that is `t`.
+pub fn time_message(what: &str) -> String {
+    format!("`t` is the time in model expressions and cannot name a {what}; rename it")
+}
 
 /// Whether a name is reserved for generated code (`__fvi…` locals and the scalar `__D`).
 pub fn reserved(name: &str) -> bool {
@@ -570,6 +577,13 @@ impl<'a> Lowerer<'a> {
         }
         if self.env.const_params.iter().any(|p| *p == name) {
             return Lowered::new(tokens, Kind::Int);
+        }
+        if name == TIME {
+            // The time: a `__D` value (so that `∂L/∂t` can be taken with a dual number)
+            // that is constant in `q` and `v`, like a parameter, for the degree analysis.
+            let mut l = Lowered::new(tokens, Kind::Dual);
+            l.names.insert(name);
+            return l;
         }
         let hint = if name == "self" {
             "; parameters are written by name, without `self.`".to_string()

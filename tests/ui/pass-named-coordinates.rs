@@ -25,7 +25,8 @@ fn main() -> Result<(), forced_vi::Error> {
         .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
         .map_err(|failure| failure.error)?;
     assert!(run.last().is_some());
-    let lambda = model.doubled_lagrangian::<f64>(&[0.0; 2], &[1.0; 2], &[0.1; 2], &[1.0; 2]);
+    let lambda =
+        model.doubled_lagrangian::<f64>(0.0, &[0.0; 2], &[1.0; 2], &[0.1; 2], &[1.0; 2]);
     assert!(lambda.is_finite());
     Ok(())
 }
