@@ -102,6 +102,11 @@ fn list() -> Result<(), report::ReportError> {
 fn work_precision(common: &CommonArgs) -> Result<(), report::ReportError> {
     let opts = options(common)?;
     let summary = report::work_precision::run(&opts)?;
+    if opts.scenes.is_empty() || opts.scenes.iter().any(|s| s == "driven_duffing") {
+        let points = report::poincare::run(&opts)?;
+        println!("Poincaré section: {points} points");
+        report::readme::assemble(&opts.out)?;
+    }
     println!(
         "wrote {} ({} runs, {} failed) in {:.1} s",
         opts.out.join("README.md").display(),

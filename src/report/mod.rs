@@ -45,6 +45,7 @@
 pub mod chart;
 pub mod orders;
 pub mod plan;
+pub mod poincare;
 pub mod readme;
 pub mod stability;
 pub mod step_cost;

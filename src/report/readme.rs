@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use super::ReportError;
 
 /// The section order of `README.md`. A new command adds its section name here.
-pub const SECTION_ORDER: &[&str] = &["work_precision", "stability", "step_cost"];
+pub const SECTION_ORDER: &[&str] = &["work_precision", "poincare", "stability", "step_cost"];
 
 /// The fixed top of `README.md`.
 pub const HEADER: &str = "# forced-vi report
