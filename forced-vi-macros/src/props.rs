@@ -21,6 +21,10 @@ const MODELS: &[(&str, &str)] = &[
         "coordinates(x, q: [f64; 3]), lagrangian = -0.5*x*x + { let mut m = 1.0; if x_dot > 0.0 { m = 3.0; } 0.5*m*x_dot*x_dot } + { let mut s = 0.0; for j in 0..3 { s += q_dot[j] * q_dot[j] / 2; } s } - k.powf(x) - x.max(q[1]), force(x = -1e308*x*x*x_dot, q = [0.0, q[0], -q_dot[2]])",
         "struct M { k: f64 }",
     ),
+    (
+        "coordinates(th), lagrangian = { let yd = -a * w * (w * t).sin(); 0.5 * (th_dot * th_dot + 2 * th.sin() * th_dot * yd) - a * (w * t).cos() + th.cos() }, force(th = -c * th_dot + (w * t).cos())",
+        "struct K { a: f64, w: f64, c: f64 }",
+    ),
 ];
 
 #[derive(Clone, Debug)]
