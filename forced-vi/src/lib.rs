@@ -52,6 +52,7 @@
 //! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
 //! | the integrator builder and its run methods | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
+//! | large models: sparse node kernels, the sparse step (DESIGN §9) | [`sparse`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
 
 pub mod control;
@@ -64,6 +65,7 @@ pub mod model;
 pub mod newton;
 mod scalar;
 pub mod scheme;
+pub mod sparse;
 mod step_equations;
 pub mod stepper;
 pub mod trajectory;

@@ -237,6 +237,13 @@ pub trait ForcedLagrangian<const N: usize> {
         let lv = self.node_gradient(q, v).lv;
         v.dot(&lv) - self.lagrangian::<f64>(&(*q).into(), &(*v).into())
     }
+
+    /// The model's sparse node kernels (DESIGN §9), if it has them. `#[forced_lagrangian]`
+    /// returns them for a model it can split into local terms; the default, `None`, keeps the
+    /// dense path.
+    fn sparse_node(&self) -> Option<&dyn crate::sparse::SparseNode> {
+        None
+    }
 }
 
 /// General node kernels built from num-dual's derivative drivers.

@@ -1,0 +1,245 @@
+//! The sparse node kernel (DESIGN §9): a model whose Lagrangian is a sum of local terms, and
+//! whose force entries each read a few coordinates, adds each term's small dense gradient and
+//! Hessian into sparse node blocks `A, B, C, E`.
+//!
+//! `#[forced_lagrangian]` implements [`SparseNode`] for models it can split into terms; a
+//! hand-written model may implement it too. The integrator finds it through
+//! [`ForcedLagrangian::sparse_node`](crate::ForcedLagrangian::sparse_node).
+
+/// One of the four node blocks (see [`NodeJacobian`](crate::NodeJacobian)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Block {
+    /// `∂(L_q + F)/∂q`.
+    A,
+    /// `∂(L_q + F)/∂v`.
+    B,
+    /// `∂L_v/∂q`.
+    C,
+    /// `∂L_v/∂v`, the mass matrix.
+    E,
+}
+
+/// The node pattern: the union of the nonzero patterns of `A, B, C, E`, an `n × n` pattern in
+/// compressed rows (columns sorted within a row, no repeats).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NodePattern {
+    n: usize,
+    row_start: Vec<usize>,
+    cols: Vec<usize>,
+}
+
+impl NodePattern {
+    /// The pattern of the `(row, col)` pairs, in any order and with repeats.
+    ///
+    /// Pairs outside `n × n` are dropped; [`NodePattern::from_pairs`]'s caller checks them
+    /// with [`NodeSink::outside`] when it records.
+    pub fn from_pairs(n: usize, mut pairs: Vec<(usize, usize)>) -> NodePattern {
+        pairs.retain(|&(r, c)| r < n && c < n);
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut row_start = vec![0; n + 1];
+        for &(r, _) in &pairs {
+            row_start[r + 1] += 1;
+        }
+        for r in 0..n {
+            row_start[r + 1] += row_start[r];
+        }
+        NodePattern {
+            n,
+            row_start,
+            cols: pairs.into_iter().map(|(_, c)| c).collect(),
+        }
+    }
+
+    /// Degrees of freedom.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Stored entries.
+    pub fn nnz(&self) -> usize {
+        self.cols.len()
+    }
+
+    /// The stored columns of `row`.
+    pub fn row(&self, row: usize) -> &[usize] {
+        match (self.row_start.get(row), self.row_start.get(row + 1)) {
+            (Some(&a), Some(&b)) => &self.cols[a..b],
+            _ => &[],
+        }
+    }
+
+    /// Where `(row, col)` is stored, if it is.
+    pub fn position(&self, row: usize, col: usize) -> Option<usize> {
+        let start = *self.row_start.get(row)?;
+        let k = self.row(row).binary_search(&col).ok()?;
+        Some(start + k)
+    }
+
+    /// Every stored `(row, col)`, row by row.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        (0..self.n).flat_map(move |r| self.row(r).iter().map(move |&c| (r, c)))
+    }
+}
+
+/// The values of the four node blocks on a [`NodePattern`] (zeros where a block has none).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeBlocks {
+    /// `A` on the pattern.
+    pub a: Vec<f64>,
+    /// `B` on the pattern.
+    pub b: Vec<f64>,
+    /// `C` on the pattern.
+    pub c: Vec<f64>,
+    /// `E` on the pattern.
+    pub e: Vec<f64>,
+}
+
+impl NodeBlocks {
+    /// Zero blocks on a pattern of `nnz` entries.
+    pub fn zeros(nnz: usize) -> NodeBlocks {
+        NodeBlocks {
+            a: vec![0.0; nnz],
+            b: vec![0.0; nnz],
+            c: vec![0.0; nnz],
+            e: vec![0.0; nnz],
+        }
+    }
+
+    /// Sets every value to zero.
+    pub fn clear(&mut self) {
+        for v in [&mut self.a, &mut self.b, &mut self.c, &mut self.e] {
+            v.iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+}
+
+enum Target<'a> {
+    /// Gradient only.
+    Gradient,
+    /// Values on a known pattern.
+    Values(&'a NodePattern, &'a mut NodeBlocks),
+    /// Records the pattern.
+    Record(&'a mut Vec<(usize, usize)>),
+}
+
+/// Receives what a [`SparseNode`] computes at one node: the gradient `(L_q + F, L_v)`,
+/// accumulated into zeroed vectors, and, when asked for, the entries of `A, B, C, E`.
+pub struct NodeSink<'a> {
+    lq_f: &'a mut [f64],
+    lv: &'a mut [f64],
+    target: Target<'a>,
+    outside: bool,
+}
+
+impl<'a> NodeSink<'a> {
+    /// A sink for the gradient alone. `lq_f` and `lv` are zeroed here.
+    pub fn gradient(lq_f: &'a mut [f64], lv: &'a mut [f64]) -> NodeSink<'a> {
+        lq_f.iter_mut().for_each(|x| *x = 0.0);
+        lv.iter_mut().for_each(|x| *x = 0.0);
+        NodeSink {
+            lq_f,
+            lv,
+            target: Target::Gradient,
+            outside: false,
+        }
+    }
+
+    /// A sink for the gradient and the blocks on `pattern`. Everything is zeroed here.
+    pub fn values(
+        lq_f: &'a mut [f64],
+        lv: &'a mut [f64],
+        pattern: &'a NodePattern,
+        blocks: &'a mut NodeBlocks,
+    ) -> NodeSink<'a> {
+        let mut sink = NodeSink::gradient(lq_f, lv);
+        blocks.clear();
+        sink.target = Target::Values(pattern, blocks);
+        sink
+    }
+
+    /// A sink that records which block entries the kernel adds (their union is the
+    /// [`NodePattern`]).
+    pub fn record(
+        lq_f: &'a mut [f64],
+        lv: &'a mut [f64],
+        pairs: &'a mut Vec<(usize, usize)>,
+    ) -> NodeSink<'a> {
+        let mut sink = NodeSink::gradient(lq_f, lv);
+        sink.target = Target::Record(pairs);
+        sink
+    }
+
+    /// Whether the caller wants the block entries (otherwise [`NodeSink::add`] may be
+    /// skipped).
+    pub fn wants_blocks(&self) -> bool {
+        !matches!(self.target, Target::Gradient)
+    }
+
+    /// Adds `x` to `(L_q + F)_i`.
+    #[inline]
+    pub fn add_lq_f(&mut self, i: usize, x: f64) {
+        match self.lq_f.get_mut(i) {
+            Some(slot) => *slot += x,
+            None => self.outside = true,
+        }
+    }
+
+    /// Adds `x` to `(L_v)_i`.
+    #[inline]
+    pub fn add_lv(&mut self, i: usize, x: f64) {
+        match self.lv.get_mut(i) {
+            Some(slot) => *slot += x,
+            None => self.outside = true,
+        }
+    }
+
+    /// Adds `x` to entry `(row, col)` of `block`. Every term adds every entry it may touch,
+    /// zero or not, so that the entries added do not depend on the state.
+    #[inline]
+    pub fn add(&mut self, block: Block, row: usize, col: usize, x: f64) {
+        match &mut self.target {
+            Target::Gradient => {}
+            Target::Record(pairs) => pairs.push((row, col)),
+            Target::Values(pattern, blocks) => match pattern.position(row, col) {
+                Some(k) => {
+                    let v = match block {
+                        Block::A => &mut blocks.a,
+                        Block::B => &mut blocks.b,
+                        Block::C => &mut blocks.c,
+                        Block::E => &mut blocks.e,
+                    };
+                    v[k] += x;
+                }
+                None => self.outside = true,
+            },
+        }
+    }
+
+    /// Whether the kernel wrote outside `n` or outside the pattern (a defect of the kernel,
+    /// which the integrator reports as [`Error::InvalidModel`](crate::Error::InvalidModel)).
+    pub fn outside(&self) -> bool {
+        self.outside
+    }
+}
+
+/// Node kernels that add local terms into sparse blocks (DESIGN §9).
+///
+/// The contract, which the integrator relies on:
+/// - [`SparseNode::eval`] adds, for every term of `L` and every force entry, its gradient
+///   into the sink, and, if [`NodeSink::wants_blocks`], every block entry the term may touch;
+/// - which entries it adds does not depend on `(t, q, v)`: the integrator records the pattern
+///   once per run and evaluates on it afterwards;
+/// - the result equals the dense kernels ([`ForcedLagrangian::node_jacobian_at`](crate::ForcedLagrangian::node_jacobian_at))
+///   up to round-off.
+pub trait SparseNode {
+    /// Degrees of freedom.
+    fn dof(&self) -> usize;
+
+    /// Adds the node's gradient `(L_q + F, L_v)` at `(t, q, v)` and, when asked, its block
+    /// entries into `sink`.
+    fn eval(&self, t: f64, q: &[f64], v: &[f64], sink: &mut NodeSink<'_>);
+
+    /// The Lagrangian `L(t, q, v)`, for the energy.
+    fn lagrangian_value(&self, t: f64, q: &[f64], v: &[f64]) -> f64;
+}
