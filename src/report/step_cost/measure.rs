@@ -44,12 +44,23 @@ fn timed<M: ForcedLagrangian<N>, const N: usize>(
     Ok((t0.elapsed().as_secs_f64(), stats))
 }
 
-/// Nanoseconds per step of one paper-model run.
+/// Nanoseconds per step of one paper-model run: with every record (`full`) through
+/// `for_each_step`, or the final state alone (`none`) through `final_state`.
 fn ns_per_step<M: ForcedLagrangian<2>>(
     integ: &Integrator<'_, M, 2>,
     t_final: f64,
+    diagnostics: &str,
 ) -> Result<f64, String> {
-    let (t, st) = timed(integ, PAPER_INIT, t_final)?;
+    let (t, st) = if diagnostics == "none" {
+        let t0 = Instant::now();
+        let end = integ
+            .final_state(PAPER_INIT, t_final)
+            .map_err(|e| e.to_string())?;
+        std::hint::black_box(&end);
+        (t0.elapsed().as_secs_f64(), end.stats)
+    } else {
+        timed(integ, PAPER_INIT, t_final)?
+    };
     Ok(t / st.steps.max(1) as f64 * 1e9)
 }
 
@@ -73,53 +84,70 @@ fn allocs_per_step<M: ForcedLagrangian<N>, const N: usize>(
     Ok(last.saturating_sub(first) as f64 / stats.steps.max(1) as f64)
 }
 
-/// The paper-model rows: generated against hand-written, interleaved repeats.
+/// Which run each paper-model row times, in report order.
+pub const DIAGNOSTICS: [&str; 2] = ["full", "none"];
+
+/// The paper-model rows: generated against hand-written, interleaved repeats, for each
+/// scheme with full diagnostics and with the final state alone.
 pub fn paper_rows(quick: bool, counter: Option<AllocCounter>) -> (Vec<Row>, bool) {
+    let mut same = true;
+    let mut rows = Vec::new();
+    for diagnostics in DIAGNOSTICS {
+        for name in SCHEMES {
+            let mut row = Row {
+                scene: "coupled_van_der_pol".into(),
+                method: name.into(),
+                n: 2,
+                diagnostics,
+                path: "dense",
+                generated: None,
+                handwritten: None,
+                iters: None,
+                allocs: None,
+                note: String::new(),
+            };
+            let counter = counter.filter(|_| diagnostics == "full");
+            if let Err(e) = paper_row(&mut row, quick, counter, &mut same) {
+                row.note = format!("failed: {e}");
+            }
+            rows.push(row);
+        }
+    }
+    (rows, same)
+}
+
+/// Measures one paper-model row in place.
+fn paper_row(
+    row: &mut Row,
+    quick: bool,
+    counter: Option<AllocCounter>,
+    same: &mut bool,
+) -> Result<(), String> {
     let (t_final, repeats) = if quick { (20.0, 7) } else { (100.0, 21) };
     let gen = CoupledVanDerPol::PAPER;
     let hand = HandCoupledVanDerPol::PAPER;
-    let mut same = true;
-    let mut rows = Vec::new();
-    for name in SCHEMES {
-        let mut row = Row {
-            scene: "coupled_van_der_pol".into(),
-            method: name.into(),
-            n: 2,
-            generated: None,
-            handwritten: None,
-            iters: None,
-            allocs: None,
-            note: String::new(),
-        };
-        let result = (|| -> Result<(), String> {
-            let s = scheme(name)?;
-            let ig = Integrator::new(&gen, s.clone(), H).map_err(|e| e.to_string())?;
-            let ih = Integrator::new(&hand, s, H).map_err(|e| e.to_string())?;
-            // Warm-up, one of each.
-            let (_, sg) = timed(&ig, PAPER_INIT, t_final)?;
-            let (_, sh) = timed(&ih, PAPER_INIT, t_final)?;
-            same &= sg.newton_iterations == sh.newton_iterations;
-            let (g, h) = interleaved(
-                repeats,
-                || ns_per_step(&ig, t_final),
-                || ns_per_step(&ih, t_final),
-            )?;
-            row.generated = Some(g);
-            row.handwritten = Some(h);
-            row.iters = Some(sg.newton_iterations as f64 / sg.steps.max(1) as f64);
-            if let Some(c) = counter {
-                let ag = allocs_per_step(&ig, PAPER_INIT, t_final, c)?;
-                let ah = allocs_per_step(&ih, PAPER_INIT, t_final, c)?;
-                row.allocs = Some(ag.max(ah));
-            }
-            Ok(())
-        })();
-        if let Err(e) = result {
-            row.note = format!("failed: {e}");
-        }
-        rows.push(row);
+    let s = scheme(&row.method)?;
+    let ig = Integrator::new(&gen, s.clone(), H).map_err(|e| e.to_string())?;
+    let ih = Integrator::new(&hand, s, H).map_err(|e| e.to_string())?;
+    // Warm-up, one of each.
+    let (_, sg) = timed(&ig, PAPER_INIT, t_final)?;
+    let (_, sh) = timed(&ih, PAPER_INIT, t_final)?;
+    *same &= sg.newton_iterations == sh.newton_iterations;
+    let d = row.diagnostics;
+    let (g, h) = interleaved(
+        repeats,
+        || ns_per_step(&ig, t_final, d),
+        || ns_per_step(&ih, t_final, d),
+    )?;
+    row.generated = Some(g);
+    row.handwritten = Some(h);
+    row.iters = Some(sg.newton_iterations as f64 / sg.steps.max(1) as f64);
+    if let Some(c) = counter {
+        let ag = allocs_per_step(&ig, PAPER_INIT, t_final, c)?;
+        let ah = allocs_per_step(&ih, PAPER_INIT, t_final, c)?;
+        row.allocs = Some(ag.max(ah));
     }
-    (rows, same)
+    Ok(())
 }
 
 /// A chain state with a smooth initial displacement.
@@ -223,6 +251,8 @@ pub fn skipped_chain(n: usize, why: String) -> Row {
         scene: "spring_chain".into(),
         method: "lobatto2".into(),
         n,
+        diagnostics: "full",
+        path: "dense",
         generated: None,
         handwritten: None,
         iters: None,

@@ -4,8 +4,9 @@
 //! Writes into the report folder:
 //!
 //! ```text
-//! step_cost.csv           scene,method,n,ns_per_step_generated,ns_per_step_handwritten,ratio,
-//!                         newton_iters_per_step,allocs_per_step
+//! step_cost.csv           scene,method,n,diagnostics,path,ns_per_step_generated,
+//!                         ns_per_step_handwritten,ratio,newton_iters_per_step,allocs_per_step
+//! ensemble_throughput.csv threads,members,member_steps_per_second
 //! step_cost_scaling.svg   time per step against n for the damped spring chain
 //! sections/step_cost.md   the section of README.md (targets of issue 6, met or not)
 //! ```
@@ -37,6 +38,7 @@ use crate::report::table::write_csv;
 use crate::report::{readme, Options, ReportError};
 
 mod compile;
+pub mod ensemble;
 mod figures;
 mod measure;
 pub mod rows;
@@ -60,6 +62,11 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
     let (mut rows, same_iterations) = measure::paper_rows(opts.quick, counter);
     eprintln!("step-cost: spring-chain scaling …");
     rows.extend(measure::chain_rows(opts.quick, counter));
+    eprintln!("step-cost: ensemble throughput on 1 and 2 threads …");
+    let ensemble = ensemble::measure(opts.quick);
+    if let Ok(t) = &ensemble {
+        write_csv(&opts.out.join("ensemble_throughput.csv"), &t.records)?;
+    }
     let exponent = measure::fit_exponent(&rows);
     let compile = if opts.quick {
         Err("not measured in --quick (it builds two crates; see the full run)".to_string())
@@ -79,6 +86,7 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
         compile,
         memory,
         same_iterations,
+        ensemble,
         elapsed: 0.0,
     };
     summary.elapsed = t0.elapsed().as_secs_f64();
@@ -101,6 +109,7 @@ mod tests {
             .iter()
             .map(|&n| Row {
                 generated: Some((n as f64).powi(2)),
+                diagnostics: "full",
                 ..measure::skipped_chain(n, String::new())
             })
             .collect();

@@ -16,6 +16,11 @@ pub struct Row {
     pub method: String,
     /// Degrees of freedom.
     pub n: usize,
+    /// `full` (every record with velocity, energy, energy balance and Newton statistics,
+    /// through `for_each_step`) or `none` (the final state only, `Integrator::final_state`).
+    pub diagnostics: &'static str,
+    /// `dense` or `sparse`: the linear algebra of the step.
+    pub path: &'static str,
     /// Median ns per step with the `#[forced_lagrangian]` kernels (`None`: not measured).
     pub generated: Option<f64>,
     /// Median ns per step with the hand-written kernels, where there are some.
@@ -70,6 +75,8 @@ pub struct Summary {
     pub memory: Memory,
     /// Whether the hand-written and generated runs took the same Newton iterations.
     pub same_iterations: bool,
+    /// The ensemble throughput, or why it was not measured.
+    pub ensemble: Result<super::ensemble::Throughput, String>,
     /// Wall time of the command.
     pub elapsed: f64,
 }
@@ -83,6 +90,10 @@ pub struct StepCostRecord {
     pub method: String,
     /// Degrees of freedom.
     pub n: usize,
+    /// `full` or `none`: whether the run computed the per-step records and diagnostics.
+    pub diagnostics: String,
+    /// `dense` or `sparse`.
+    pub path: String,
     /// Generated kernels, ns per step.
     #[serde(with = "sci::opt")]
     pub ns_per_step_generated: Option<f64>,
@@ -106,6 +117,8 @@ impl From<&Row> for StepCostRecord {
             scene: r.scene.clone(),
             method: r.method.clone(),
             n: r.n,
+            diagnostics: r.diagnostics.into(),
+            path: r.path.into(),
             ns_per_step_generated: r.generated,
             ns_per_step_handwritten: r.handwritten,
             ratio: r.ratio(),
