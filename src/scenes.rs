@@ -226,19 +226,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
 
 /// Indices of about `samples` evenly spread points: keeps a step when its time reaches the next
 /// sample time.
-struct Sampler {
+#[derive(Clone, Debug)]
+pub struct Sampler {
     next: f64,
     dt: f64,
 }
 
 impl Sampler {
-    fn new(t_final: f64, samples: usize) -> Self {
+    /// About `samples` points over `[0, t_final]`.
+    pub fn new(t_final: f64, samples: usize) -> Self {
         Sampler {
             next: 0.0,
             dt: t_final / samples.max(1) as f64,
         }
     }
-    fn take(&mut self, t: f64) -> bool {
+    /// Whether to keep the point at time `t` (times must not decrease).
+    pub fn take(&mut self, t: f64) -> bool {
         if t >= self.next {
             while self.next <= t {
                 self.next += self.dt;
@@ -458,130 +461,4 @@ pub fn all() -> Result<Vec<Box<dyn Scene>>, SceneError> {
     ]
     .into_iter()
     .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn scene(name: &str) -> Box<dyn Scene> {
-        all()
-            .unwrap()
-            .into_iter()
-            .find(|s| s.name() == name)
-            .unwrap()
-    }
-
-    /// The initial data and final times the report promises (and `scripts/reference.py` uses).
-    #[test]
-    fn scenes_start_and_end_where_documented() {
-        let cases: [(&str, [f64; 2], [f64; 2], f64); 4] = [
-            ("coupled_van_der_pol", [-0.5, -0.25], [0.0, 4.0], 1.0),
-            ("damped_oscillator", [1.0, 0.0], [0.0, 0.5], 10.0),
-            ("double_pendulum_friction", [1.0, 0.5], [0.0, 0.0], 5.0),
-            ("kepler_drag", [1.0, 0.0], [0.0, 1.2], 20.0),
-        ];
-        for (name, q0, v0, t) in cases {
-            let s = scene(name);
-            assert_eq!(s.members(), 1, "{name}");
-            assert_eq!(s.initial(0).unwrap(), (q0.to_vec(), v0.to_vec()), "{name}");
-            assert_eq!(s.t_final(), t, "{name}");
-        }
-        let ens = scene("coupled_van_der_pol_ensemble");
-        assert_eq!(ens.members(), 25);
-        assert_eq!(ens.t_final(), 1.0);
-        for m in 0..25 {
-            let (q, v) = ens.initial(m).unwrap();
-            assert!(q.iter().all(|x| (-4.0..=4.0).contains(x)));
-            assert_eq!(v, vec![0.0, 4.0]);
-        }
-    }
-
-    /// The report trusts a baseline only because it converges to the references: at a tight
-    /// tolerance it agrees with every scene's reference, and tightening the tolerance from
-    /// 1e-6 to 1e-10 shrinks its error.
-    #[test]
-    fn baselines_match_the_references() {
-        for s in all().unwrap() {
-            for b in Baseline::ALL {
-                let bound = match b {
-                    Baseline::Dop853 | Baseline::Tsit45 => 1e-7,
-                    Baseline::Bdf => 1e-5,
-                    Baseline::Esdirk34 => 1e-4,
-                };
-                let driven = ["driven_duffing", "kapitza_pendulum"].contains(&s.name());
-                if driven && b == Baseline::Dop853 {
-                    // Not used for time-dependent models (see `baselines::solve`).
-                    assert!(s.run_baseline(b, 1e-6, 0).is_err());
-                    continue;
-                }
-                if driven && b != Baseline::Tsit45 {
-                    // On the driven scenes only the explicit baseline is held to this: the
-                    // implicit ones may fail (ESDIRK34 stops with 50 nonlinear failures on
-                    // driven Duffing at tol 1e-6); the report records what they do.
-                    continue;
-                }
-                for m in 0..s.members().min(3) {
-                    let r = s.reference(m).unwrap();
-                    let err = |tol: f64| {
-                        let o = s.run_baseline(b, tol, m).unwrap();
-                        let dq = o.end.q.iter().zip(&r.q).map(|(a, b)| (a - b).abs());
-                        let dp = o.end.p.iter().zip(&r.p).map(|(a, b)| (a - b).abs());
-                        dq.chain(dp).fold(0.0, f64::max)
-                    };
-                    let (loose, tight) = (err(1e-6), err(1e-10));
-                    let name = s.name();
-                    assert!(
-                        tight <= bound,
-                        "{name}/{m} {b}: error {tight:e} at tol 1e-10"
-                    );
-                    assert!(
-                        tight < loose / 10.0,
-                        "{name}/{m} {b}: {loose:e} -> {tight:e}"
-                    );
-                }
-            }
-        }
-    }
-
-    /// The variational schemes converge to the same references (the report's orders rely on
-    /// it); the paper tests check this in detail for the paper's scenes.
-    #[test]
-    fn lobatto_matches_the_references() {
-        let scheme = Scheme::lobatto(4).unwrap();
-        for s in all().unwrap() {
-            // Kapitza's drive has period 0.126: it needs steps below the T/400 = 0.025 of
-            // the others.
-            let h = if s.name() == "kapitza_pendulum" {
-                1e-3
-            } else {
-                s.t_final() / 400.0
-            };
-            let o = s.run_variational(&scheme, h, 0).unwrap();
-            let r = s.reference(0).unwrap();
-            let e = o.end.q.iter().zip(&r.q).map(|(a, b)| (a - b).abs());
-            let e = e.fold(0.0, f64::max);
-            assert!(e < 1e-8, "{}: {e:e}", s.name());
-        }
-    }
-
-    #[test]
-    fn scene_names_are_unique() {
-        let scenes = all().unwrap();
-        let mut names: Vec<_> = scenes.iter().map(|s| s.name()).collect();
-        names.sort_unstable();
-        names.dedup();
-        assert_eq!(names.len(), scenes.len());
-    }
-
-    #[test]
-    fn sampler_spreads_points() {
-        let mut s = Sampler::new(10.0, 5);
-        let kept: Vec<f64> = (0..=100)
-            .map(|k| k as f64 * 0.1)
-            .filter(|&t| s.take(t))
-            .collect();
-        assert!((5..=6).contains(&kept.len()), "{kept:?}");
-        assert_eq!(kept[0], 0.0);
-    }
 }

@@ -205,29 +205,3 @@ impl ReportError {
         move |source| ReportError::Io { path, source }
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn methods_parse() {
-        assert_eq!(
-            "lobatto3".parse::<Method>().unwrap(),
-            Method::Variational(SchemeId::Lobatto(3))
-        );
-        assert_eq!(
-            "bdf".parse::<Method>().unwrap(),
-            Method::Baseline(Baseline::Bdf)
-        );
-        assert!("rk4".parse::<Method>().is_err());
-        let names: Vec<String> = Method::defaults().iter().map(Method::name).collect();
-        assert_eq!(
-            names,
-            [
-                "lobatto2", "lobatto3", "lobatto4", "lobatto5", "midpoint", "dop853", "tsit45",
-                "bdf", "esdirk34"
-            ]
-        );
-    }
-}

@@ -125,29 +125,3 @@ impl Plan {
         wanted.clamp(1, self.max_repeats)
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn step_sizes_cover_the_range_and_land_on_t() {
-        let p = Plan::full();
-        let hs = p.step_sizes(1.0);
-        assert_eq!(hs[0], 1.0);
-        assert!((hs.last().unwrap() - 5e-5).abs() < 1e-18);
-        assert!(hs.windows(2).all(|w| w[1] < w[0]));
-        for h in p.step_sizes(20.0) {
-            let n = 20.0 / h;
-            assert!((n - n.round()).abs() < 1e-9 && h <= 1.0);
-        }
-    }
-
-    #[test]
-    fn repeats_adapt_to_run_time() {
-        let p = Plan::full();
-        assert_eq!(p.repeats(10.0), 1);
-        assert_eq!(p.repeats(1e-6), p.max_repeats);
-        assert!(Plan::quick().tolerances.last().unwrap() >= &1e-13);
-    }
-}

@@ -84,28 +84,3 @@ pub fn assemble(out: &Path) -> Result<(), ReportError> {
     let path = out.join("README.md");
     fs::write(&path, readme).map_err(ReportError::io(&path))
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sections_are_ordered_and_replaced() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path();
-        write_section(out, "step_cost", "## Step cost\nc").unwrap();
-        write_section(out, "zzz_extra", "## Extra\nz").unwrap();
-        write_section(out, "work_precision", "## Work\nold").unwrap();
-        write_section(out, "work_precision", "## Work\nnew").unwrap();
-        let readme = fs::read_to_string(out.join("README.md")).unwrap();
-        assert!(readme.starts_with("# forced-vi report"));
-        let (w, c, z) = (
-            readme.find("## Work").unwrap(),
-            readme.find("## Step cost").unwrap(),
-            readme.find("## Extra").unwrap(),
-        );
-        assert!(w < c && c < z);
-        assert!(readme.contains("new") && !readme.contains("old"));
-        assert!(write_section(out, "../evil", "x").is_err());
-    }
-}

@@ -79,37 +79,3 @@ pub fn check_scenes(requested: &[String], known: &[&str]) -> Result<(), ReportEr
 pub fn selected(requested: &[String], name: &str) -> bool {
     requested.is_empty() || requested.iter().any(|r| r == name)
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    struct Squares;
-
-    impl Study for Squares {
-        type Case = i32;
-        type Row = Option<i32>;
-        const PARALLEL: bool = true;
-        fn label(&self, case: &i32) -> String {
-            case.to_string()
-        }
-        fn run(&self, case: &i32) -> Option<i32> {
-            assert!(*case != 3, "three");
-            Some(case * case)
-        }
-        fn panicked(&self, _: &i32) -> Option<i32> {
-            None
-        }
-    }
-
-    #[test]
-    fn rows_keep_the_case_order_and_panics_become_rows() {
-        let hook = std::panic::take_hook();
-        std::panic::set_hook(Box::new(|_| {}));
-        let rows = run_cases(&Squares, &[1, 2, 3, 4], false);
-        std::panic::set_hook(hook);
-        assert_eq!(rows, [Some(1), Some(4), None, Some(16)]);
-        assert!(check_scenes(&["x".into()], &["a", "b"]).is_err());
-        assert!(selected(&[], "a") && !selected(&["b".into()], "a"));
-    }
-}

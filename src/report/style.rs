@@ -203,22 +203,3 @@ pub fn sci(x: &f64) -> String {
         format!("{x:.0e}")
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use forced_vi::SchemeId;
-
-    #[test]
-    fn looks_and_labels() {
-        let l2 = Method::Variational(SchemeId::Lobatto(2));
-        let bdf = Method::Baseline(Baseline::Bdf);
-        assert_eq!(Look::of(&l2, &[]).color, PALETTE[0]);
-        assert!(Look::of(&bdf, &[]).dashed && !Look::of(&l2, &[]).dashed);
-        assert!(Look::adaptive(&l2, &[]).dashed);
-        assert_eq!(Look::adaptive(&l2, &[]).color, PALETTE[0]);
-        assert_eq!(sci(&1e-3), "1e-3");
-        assert_eq!(sci(&1.0), "1");
-        assert_eq!(log_range([1.0, 4.0, -1.0].into_iter()), Some((0.5, 8.0)));
-    }
-}

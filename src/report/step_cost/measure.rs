@@ -246,6 +246,7 @@ fn chain_row<const N: usize>(quick: bool, counter: Option<AllocCounter>) -> Row 
     row
 }
 
+/// A chain row without a measurement, with the reason.
 pub fn skipped_chain(n: usize, why: String) -> Row {
     Row {
         scene: "spring_chain".into(),

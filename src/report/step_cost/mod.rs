@@ -37,10 +37,10 @@ use crate::report::style;
 use crate::report::table::write_csv;
 use crate::report::{readme, Options, ReportError};
 
-mod compile;
+pub mod compile;
 pub mod ensemble;
 mod figures;
-mod measure;
+pub mod measure;
 pub mod rows;
 mod section;
 
@@ -97,34 +97,4 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
     );
     readme::write_section(&opts.out, SECTION, &md)?;
     Ok(summary)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn exponent_fit() {
-        let rows: Vec<Row> = [32usize, 128, 512]
-            .iter()
-            .map(|&n| Row {
-                generated: Some((n as f64).powi(2)),
-                diagnostics: "full",
-                ..measure::skipped_chain(n, String::new())
-            })
-            .collect();
-        let (e, ns) = measure::fit_exponent(&rows).unwrap();
-        assert!((e - 2.0).abs() < 1e-9);
-        assert_eq!(ns, [32, 128, 512]);
-    }
-
-    #[test]
-    fn compile_crate_source_has_every_model() {
-        let src = compile::crate_source(10);
-        for i in 0..10 {
-            assert!(src.contains(&format!("pub fn run{i}()")));
-            assert!(src.contains(&format!("pub struct M{i}")));
-        }
-        assert!(compile::crate_source(1).contains("M0 { eps: 0.5, rho: 0.5, lambda: 0.5 }"));
-    }
 }
