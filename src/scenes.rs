@@ -126,6 +126,15 @@ pub trait Scene: Send + Sync {
         t_final: f64,
         samples: usize,
     ) -> Result<BalanceSeries, SceneError>;
+    /// The same with adaptive steps at `rtol = atol = tol` (first step `t_final`, as
+    /// [`Scene::run_adaptive`]).
+    fn balance_adaptive(
+        &self,
+        scheme: &Scheme,
+        tol: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError>;
     /// The same for a baseline, whose work integral is an extra ODE component.
     fn balance_baseline(
         &self,
@@ -354,27 +363,19 @@ where
         t_final: f64,
         samples: usize,
     ) -> Result<BalanceSeries, SceneError> {
-        let (q0, v0) = self.start(0)?;
         let integ = Integrator::new(&self.model, scheme.clone(), h)?;
-        let mut out = BalanceSeries::default();
-        let mut sampler = Sampler::new(t_final, samples);
-        let mut last = (0.0, 0.0);
-        let stats = integ
-            .for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
-                if sampler.take(r.t) {
-                    out.t.push(r.t);
-                    out.balance.push(r.energy_balance);
-                }
-                last = (r.t, r.energy_balance);
-            })
-            .map_err(|f| f.error)?;
-        if out.t.last() != Some(&last.0) {
-            out.t.push(last.0);
-            out.balance.push(last.1);
-        }
-        out.steps = stats.steps;
-        out.newton_iterations = stats.newton_iterations;
-        Ok(out)
+        self.balance_with(&integ, t_final, samples)
+    }
+
+    fn balance_adaptive(
+        &self,
+        scheme: &Scheme,
+        tol: f64,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError> {
+        let integ = Integrator::new(&self.model, scheme.clone(), t_final)?.tolerances(tol, tol)?;
+        self.balance_with(&integ, t_final, samples)
     }
 
     fn balance_baseline(
@@ -403,6 +404,37 @@ where
         }
         out.steps = run.steps;
         out.newton_iterations = run.newton_iterations;
+        Ok(out)
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
+    /// The sampled energy-balance error of member 0 along one run of `integ`.
+    fn balance_with(
+        &self,
+        integ: &Integrator<'_, M, N>,
+        t_final: f64,
+        samples: usize,
+    ) -> Result<BalanceSeries, SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let mut out = BalanceSeries::default();
+        let mut sampler = Sampler::new(t_final, samples);
+        let mut last = (0.0, 0.0);
+        let stats = integ
+            .for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
+                if sampler.take(r.t) {
+                    out.t.push(r.t);
+                    out.balance.push(r.energy_balance);
+                }
+                last = (r.t, r.energy_balance);
+            })
+            .map_err(|f| f.error)?;
+        if out.t.last() != Some(&last.0) {
+            out.t.push(last.0);
+            out.balance.push(last.1);
+        }
+        out.steps = stats.steps;
+        out.newton_iterations = stats.newton_iterations;
         Ok(out)
     }
 }

@@ -172,14 +172,18 @@ fn energy_balance(path: &Path, lr: &LongRun, methods: &[Method]) -> Result<bool,
                 .filter(|(t, _)| **t > 0.0)
                 .map(|(t, b)| (*t, b.abs().max(BALANCE_FLOOR)))
                 .collect();
-            let param = if c.method.is_variational() {
+            let param = if c.method.is_variational() && c.mode == Mode::Fixed {
                 format!("h = {:.3}", c.h_or_tol)
             } else {
                 format!("tol = {:.0e}", c.h_or_tol)
             };
+            let look = match c.mode {
+                Mode::Fixed => Look::of(&c.method, methods),
+                Mode::Adaptive => Look::adaptive(&c.method, methods),
+            };
             Curve {
-                look: Look::of(&c.method, methods),
-                label: format!("{} ({param}, {:.2} s)", c.method, c.seconds),
+                look,
+                label: format!("{} ({param}, {:.2} s)", c.mode.label(&c.method), c.seconds),
                 points,
                 band: None,
             }

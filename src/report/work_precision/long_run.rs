@@ -3,11 +3,14 @@
 //! The budget is the wall time of `lobatto3` with `h = 0.02` ([`LONG_RUN_REFERENCE_H`]). Each
 //! variational scheme gets the step size whose cost meets the budget (predicted from a pilot
 //! run over a tenth of the time, then corrected once); each baseline gets, from a ladder of
-//! tolerances `10^(−2 − k/2)`, the one whose measured time is nearest to it.
+//! tolerances `10^(−2 − k/2)`, the one whose measured time is nearest to it. Each variational
+//! scheme also runs adaptively (issue 11), with the tolerance chosen the same way from
+//! `10^(−3 − k/2)`: the energy ledger `E − E0 − W` with variable steps beside the fixed-step
+//! one.
 
 use forced_vi::{Scheme, SchemeId};
 
-use super::rows::BalanceCurve;
+use super::rows::{BalanceCurve, Mode};
 use crate::baselines::Baseline;
 use crate::report::plan::Plan;
 use crate::report::study::Study;
@@ -82,6 +85,7 @@ impl<'a> LongRunStudy<'a> {
         let series = result.ok()?;
         Some(BalanceCurve {
             method,
+            mode: Mode::Fixed,
             h_or_tol: h,
             seconds,
             series,
@@ -89,20 +93,42 @@ impl<'a> LongRunStudy<'a> {
     }
 
     fn baseline(&self, method: Method, b: Baseline) -> Option<BalanceCurve> {
+        self.nearest_budget(method, Mode::Fixed, -2.0, |tol| {
+            self.scene
+                .balance_baseline(b, tol, self.t_final, self.samples)
+        })
+    }
+
+    fn adaptive(&self, method: Method, id: SchemeId) -> Option<BalanceCurve> {
+        let scheme = Scheme::new(id).ok()?;
+        self.nearest_budget(method, Mode::Adaptive, -3.0, |tol| {
+            self.scene
+                .balance_adaptive(&scheme, tol, self.t_final, self.samples)
+        })
+    }
+
+    /// Walks the tolerances `10^(first − k/2)` down to 1e-13 and keeps the run whose time is
+    /// nearest the budget; stops once a run costs more than 1.5 budgets.
+    fn nearest_budget(
+        &self,
+        method: Method,
+        mode: Mode,
+        first: f64,
+        run: impl Fn(f64) -> Result<BalanceSeries, SceneError>,
+    ) -> Option<BalanceCurve> {
         let mut best: Option<BalanceCurve> = None;
         let gap = |seconds: f64| (seconds / self.budget).ln().abs();
-        for k in 0..=22 {
-            let tol = 10f64.powf(-2.0 - 0.5 * f64::from(k));
-            let (result, seconds) = timed(|| {
-                self.scene
-                    .balance_baseline(b, tol, self.t_final, self.samples)
-            });
+        let mut tol = 10f64.powf(first);
+        while tol >= 1e-13 {
+            let (result, seconds) = timed(|| run(tol));
+            tol /= 10f64.sqrt();
             // A loose tolerance may fail where a tighter one succeeds.
             let Ok(series) = result else { continue };
             if best.as_ref().is_none_or(|c| gap(seconds) < gap(c.seconds)) {
                 best = Some(BalanceCurve {
                     method,
-                    h_or_tol: tol,
+                    mode,
+                    h_or_tol: tol * 10f64.sqrt(),
                     seconds,
                     series,
                 });
@@ -116,22 +142,24 @@ impl<'a> LongRunStudy<'a> {
 }
 
 impl Study for LongRunStudy<'_> {
-    type Case = Method;
+    type Case = (Method, Mode);
     type Row = Option<BalanceCurve>;
     const PARALLEL: bool = false;
 
-    fn label(&self, method: &Method) -> String {
-        format!("{} long run: {method}", self.scene.name())
+    fn label(&self, (method, mode): &(Method, Mode)) -> String {
+        format!("{} long run: {}", self.scene.name(), mode.label(method))
     }
 
-    fn run(&self, method: &Method) -> Option<BalanceCurve> {
-        match *method {
-            Method::Variational(id) => self.variational(*method, id),
-            Method::Baseline(b) => self.baseline(*method, b),
+    fn run(&self, &(method, mode): &(Method, Mode)) -> Option<BalanceCurve> {
+        match (method, mode) {
+            (Method::Variational(id), Mode::Fixed) => self.variational(method, id),
+            (Method::Variational(id), Mode::Adaptive) => self.adaptive(method, id),
+            (Method::Baseline(b), Mode::Fixed) => self.baseline(method, b),
+            (Method::Baseline(_), Mode::Adaptive) => None,
         }
     }
 
-    fn panicked(&self, _: &Method) -> Option<BalanceCurve> {
+    fn panicked(&self, _: &(Method, Mode)) -> Option<BalanceCurve> {
         None
     }
 }

@@ -97,7 +97,13 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
     summary.long_run = long_scene
         .and_then(|s| long_run::LongRunStudy::new(*s, &plan))
         .map(|lr| {
-            let curves = run_cases(&lr, &methods, opts.progress);
+            let fixed = methods.iter().map(|m| (*m, Mode::Fixed));
+            let adaptive = methods
+                .iter()
+                .filter(|m| m.is_variational())
+                .map(|m| (*m, Mode::Adaptive));
+            let cases: Vec<_> = fixed.chain(adaptive).collect();
+            let curves = run_cases(&lr, &cases, opts.progress);
             LongRun {
                 scene: lr.scene.name(),
                 t_final: lr.t_final,

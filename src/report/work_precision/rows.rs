@@ -128,7 +128,9 @@ pub struct OrderRow {
 pub struct BalanceCurve {
     /// The method.
     pub method: Method,
-    /// Its step size or tolerance.
+    /// Fixed steps or adaptive ones.
+    pub mode: Mode,
+    /// Its step size or tolerance (`rtol = atol`).
     pub h_or_tol: f64,
     /// Wall time of the run.
     pub seconds: f64,
@@ -364,6 +366,9 @@ pub struct BalanceRecord {
     /// `E(t) − E(0) − W(t)`.
     #[serde(with = "sci")]
     pub energy_balance: f64,
+    /// `fixed` or `adaptive` (appended, as in `work_precision.csv`).
+    #[serde(with = "text")]
+    pub mode: Mode,
 }
 
 impl LongRun {
@@ -379,6 +384,7 @@ impl LongRun {
                     seconds: c.seconds,
                     t: *t,
                     energy_balance: *b,
+                    mode: c.mode,
                 });
             }
         }
