@@ -568,8 +568,8 @@ mod scenes {
 }
 
 mod report_step_cost {
-    use forced_vi_scenes::report::step_cost::{compile, measure};
     use forced_vi_scenes::report::step_cost::*;
+    use forced_vi_scenes::report::step_cost::{compile, measure};
 
     #[test]
     fn exponent_fit() {
