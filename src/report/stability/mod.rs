@@ -51,7 +51,7 @@ mod section;
 pub use rows::{BaselineRow, Outcome, Row, StabilityRecord, Summary, MAX_SUBDIVISIONS};
 pub use scenes::{CHAIN_DOF, OVERDAMPED_ZETA_100, SCENES};
 
-use scenes::Planned;
+use scenes::{Grid, Planned};
 
 /// The section name (`sections/stability.md`).
 pub const SECTION: &str = "stability";
@@ -144,31 +144,24 @@ impl Study for BaselineRuns<'_> {
 
 /// The variational cases, longest runs first so that the cores finish together.
 fn variational_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, SchemeId, f64)> {
-    let filter: Vec<SchemeId> = methods
-        .iter()
-        .filter_map(|m| match m {
-            Method::Variational(id) => Some(*id),
-            Method::Baseline(_) => None,
-        })
-        .collect();
-    let mut jobs = Vec::new();
-    for (i, (_, grid)) in selected.iter().enumerate() {
-        let ids = if filter.is_empty() {
-            &grid.methods
-        } else {
-            &filter
-        };
-        for &id in ids {
-            jobs.extend(grid.hs.iter().map(|&h| (i, id, h)));
-        }
-    }
-    jobs.sort_by(|a, b| a.2.total_cmp(&b.2));
-    jobs
+    scheme_cases(selected, methods, |grid| (&grid.methods, &grid.hs))
 }
 
 /// The adaptive cases: the scene's schemes (or `--method`) × its adaptive tolerances,
 /// tightest first.
 fn adaptive_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, SchemeId, f64)> {
+    scheme_cases(selected, methods, |grid| {
+        (&grid.adaptive_methods, &grid.adaptive_tols)
+    })
+}
+
+/// Every scene × scheme × parameter, smallest parameter first. `pick` gives a scene's
+/// schemes and parameters (step sizes or tolerances); `--method` replaces the schemes.
+fn scheme_cases(
+    selected: &[&Planned],
+    methods: &[Method],
+    pick: impl Fn(&Grid) -> (&Vec<SchemeId>, &Vec<f64>),
+) -> Vec<(usize, SchemeId, f64)> {
     let filter: Vec<SchemeId> = methods
         .iter()
         .filter_map(|m| match m {
@@ -178,13 +171,10 @@ fn adaptive_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, Sche
         .collect();
     let mut jobs = Vec::new();
     for (i, (_, grid)) in selected.iter().enumerate() {
-        let ids = if filter.is_empty() {
-            &grid.adaptive_methods
-        } else {
-            &filter
-        };
+        let (ids, params) = pick(grid);
+        let ids = if filter.is_empty() { ids } else { &filter };
         for &id in ids {
-            jobs.extend(grid.adaptive_tols.iter().map(|&t| (i, id, t)));
+            jobs.extend(params.iter().map(|&x| (i, id, x)));
         }
     }
     jobs.sort_by(|a, b| a.2.total_cmp(&b.2));

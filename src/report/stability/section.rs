@@ -135,14 +135,6 @@ fn outcomes(s: &Summary, cases: &[&dyn Case]) -> String {
          finite, but no better than a guess. The runtime has no way to see this; the outcome \
          column does not either.\n\n",
     );
-    let failed = move |c: &Counts| match (c.failed.as_slice(), c.scene == "all") {
-        (_, true) => c.failed_total().to_string(),
-        ([], false) => "0".to_string(),
-        (kinds, false) => {
-            let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k}: {n}")).collect();
-            kinds.join(", ")
-        }
-    };
     md.push_str(&markdown(
         &counts,
         &[
@@ -151,7 +143,7 @@ fn outcomes(s: &Summary, cases: &[&dyn Case]) -> String {
             col("ok", |c: &Counts| c.ok.to_string()),
             col("recovered", |c: &Counts| c.recovered.to_string()),
             col("of which wrong", |c: &Counts| c.wrong.to_string()),
-            col("failed (by kind)", failed),
+            col("failed (by kind)", failed_by_kind),
         ],
     ));
     md.push('\n');
@@ -388,14 +380,6 @@ fn adaptive(s: &Summary, cases: &[&dyn Case]) -> String {
          are off by more than half the solution's size.\n\n",
         s.adaptive.len()
     );
-    let failed = |c: &Counts| match (c.failed.as_slice(), c.scene == "all") {
-        (_, true) => c.failed_total().to_string(),
-        ([], false) => "0".to_string(),
-        (kinds, false) => {
-            let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k}: {n}")).collect();
-            kinds.join(", ")
-        }
-    };
     md.push_str(&markdown(
         &counts,
         &[
@@ -403,7 +387,7 @@ fn adaptive(s: &Summary, cases: &[&dyn Case]) -> String {
             col("runs", |c: &Counts| c.runs.to_string()),
             col("ok", |c: &Counts| c.ok.to_string()),
             col("wrong (err > 100·tol)", |c: &Counts| c.wrong.to_string()),
-            col("failed (by kind)", failed),
+            col("failed (by kind)", failed_by_kind),
         ],
     ));
     md.push('\n');
@@ -583,3 +567,15 @@ baselines either way; these runs take microseconds to milliseconds, so timing no
 it cannot see a run that is stable but wrong. The `wrong` column and `err_final` do. Where the \
 midpoint rule finishes, its energy balance stays at 1e-6 or below even when the trajectory \
 is wrong, so a small energy-balance error is no evidence of accuracy either.";
+
+/// The failures of a scene by kind (`all`: their total).
+fn failed_by_kind(c: &Counts) -> String {
+    match (c.failed.as_slice(), c.scene == "all") {
+        (_, true) => c.failed_total().to_string(),
+        ([], false) => "0".to_string(),
+        (kinds, false) => {
+            let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{k}: {n}")).collect();
+            kinds.join(", ")
+        }
+    }
+}

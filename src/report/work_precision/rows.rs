@@ -299,29 +299,40 @@ impl From<&OrderRow> for OrderRecord {
 
 /// A line of `ensemble.csv`: min, mean and max over the members.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub struct EnsembleRecord {
+    /// The scene.
     pub scene: String,
+    /// The method.
     #[serde(with = "text")]
     pub method: Method,
+    /// Its step size or tolerance.
     #[serde(with = "sci")]
     pub h_or_tol: f64,
+    /// Smallest error in q over the members.
     #[serde(with = "sci")]
     pub err_q_min: f64,
+    /// Mean error in q over the members.
     #[serde(with = "sci")]
     pub err_q_mean: f64,
+    /// Largest error in q over the members.
     #[serde(with = "sci")]
     pub err_q_max: f64,
+    /// Smallest error in p over the members.
     #[serde(with = "sci")]
     pub err_p_min: f64,
+    /// Mean error in p over the members.
     #[serde(with = "sci")]
     pub err_p_mean: f64,
+    /// Largest error in p over the members.
     #[serde(with = "sci")]
     pub err_p_max: f64,
+    /// Smallest error in the energy over the members.
     #[serde(with = "sci")]
     pub err_energy_min: f64,
+    /// Mean error in the energy over the members.
     #[serde(with = "sci")]
     pub err_energy_mean: f64,
+    /// Largest error in the energy over the members.
     #[serde(with = "sci")]
     pub err_energy_max: f64,
 }
