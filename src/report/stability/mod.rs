@@ -43,10 +43,12 @@ use crate::report::study::{self, run_cases, Study};
 use crate::report::table::write_csv;
 use crate::report::{readme, Method, Options, ReportError};
 
+mod adaptive_section;
 mod problem;
 pub mod rows;
 mod scenes;
 mod section;
+mod tally;
 
 pub use rows::{BaselineRow, Outcome, Row, StabilityRecord, Summary, MAX_SUBDIVISIONS};
 pub use scenes::{CHAIN_DOF, OVERDAMPED_ZETA_100, SCENES};
