@@ -37,11 +37,17 @@ pub struct Checked<'a> {
     /// Some index of the Lagrangian or the force is checked at run time: generate
     /// `check_model`.
     pub checked_index: bool,
+    /// The model as local terms, if it splits (DESIGN §9).
+    pub split: Option<crate::split::Split>,
 }
 
 /// The largest number of coordinates of a model with a literal length (a larger one is
-/// refused at its length): the node blocks are `N × N` matrices on the stack.
-pub const MAX_COORDINATES: usize = 1024;
+/// refused at its length).
+pub const MAX_COORDINATES: usize = 16384;
+
+/// The largest literal number of coordinates of a model that does not split into local
+/// terms: its dense kernels differentiate the whole model at once, with `N × N` blocks.
+pub const MAX_DENSE_COORDINATES: usize = 1024;
 
 /// A term of the Lagrangian with its sign applied.
 pub struct Term {
@@ -228,7 +234,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         || force
             .as_ref()
             .is_some_and(|f| f.fns.iter().any(|func| func.checked));
-    Some(Checked {
+    let mut checked = Checked {
         model,
         env,
         n,
@@ -240,7 +246,30 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         constant_mass,
         uses_time,
         checked_index,
-    })
+        split: None,
+    };
+    checked.split = crate::split::split(&checked);
+    check_dense_size(cx, &checked);
+    Some(checked)
+}
+
+/// Rule: a model with more than [`MAX_DENSE_COORDINATES`] coordinates (a literal length)
+/// splits into local terms; whole-model kernels at that size would need `N × N` dual
+/// numbers.
+fn check_dense_size(cx: &Ctxt, c: &Checked) {
+    let Some(n) = c.n.literal() else { return };
+    if n <= MAX_DENSE_COORDINATES || c.split.is_some() {
+        return;
+    }
+    let Some((key, _)) = &c.model.coordinates else {
+        return;
+    };
+    cx.error_spanned_by(
+        key,
+        format!(
+            "too many coordinates for a model that does not split into local terms: {n} > {MAX_DENSE_COORDINATES}; write the Lagrangian as a sum of index sums such as `(0..N).map(|i| ...).sum()` whose terms read `q[i]`, `q[i + 1]`, ... (no whole-array expression), and each force entry likewise"
+        ),
+    );
 }
 
 /// The expression of one force entry (an array element for `q = [...]`).
@@ -459,9 +488,7 @@ fn check_coordinates(cx: &Ctxt, model: &Model, const_params: &[Ident]) -> Vec<Gr
                         },
                         |t| quote!(#t),
                     ),
-                    format!(
-                        "too many coordinates: a model has at most {MAX_COORDINATES} (the node blocks are `N × N` matrices)"
-                    ),
+                    format!("too many coordinates: a model has at most {MAX_COORDINATES}"),
                 );
                 break;
             }
@@ -497,7 +524,7 @@ fn array_len(cx: &Ctxt, c: &Coord, ty: &Type, const_params: &[Ident]) -> Option<
                 cx.error_spanned_by(
                     i,
                     format!(
-                        "array length {n} is too large: a model has at most {MAX_COORDINATES} coordinates (the node blocks are `N × N` matrices)"
+                        "array length {n} is too large: a model has at most {MAX_COORDINATES} coordinates"
                     ),
                 );
                 None

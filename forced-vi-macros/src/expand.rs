@@ -99,6 +99,10 @@ pub fn generate(c: &Checked) -> TokenStream {
     };
     let time_param = timed.then(|| quote!(#dt: #d,));
     let time_arg = timed.then(|| quote!(#dt,));
+    // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
+    // also computes its dense blocks through them.
+    let split = c.split.as_ref();
+    let through = split.is_some() && crate::sparse::dense_through_split(c);
 
     // L(q, v), generic; for a driven model L(t, q, v), with `lagrangian` its value at t = 0.
     let l_bind = bindings(&c.env, n, &c.lagrangian.names, &dq, &dv, &d_ty);
@@ -107,7 +111,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         let t_bind = time_binding(&c.lagrangian.names);
         quote! {
             #[inline]
-            #[allow(unused_braces)]
+            #[allow(unused_braces, unused_parens)]
             fn lagrangian_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
                 #t_bind
                 #l_bind
@@ -121,7 +125,7 @@ pub fn generate(c: &Checked) -> TokenStream {
     } else {
         quote! {
             #[inline]
-            #[allow(unused_braces)]
+            #[allow(unused_braces, unused_parens)]
             fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
                 #l_bind
                 #l_body
@@ -131,8 +135,9 @@ pub fn generate(c: &Checked) -> TokenStream {
 
     // Helpers: non-polynomial terms and force entries.
     let mut helpers = TokenStream::new();
-    // A driven model uses the runtime's general kernels, which call no term helper.
-    let dual_terms: &[crate::check::Term] = if timed { &[] } else { &c.dual_terms };
+    // A driven model uses the runtime's general kernels, which call no term helper; nor do
+    // kernels that go through the per-term code.
+    let dual_terms: &[crate::check::Term] = if timed || through { &[] } else { &c.dual_terms };
     for (k, t) in dual_terms.iter().enumerate() {
         let name = format_ident!("__fvi_l{}", k);
         let bind = bindings(&c.env, n, &t.lowered.names, &dq, &dv, &d_ty);
@@ -140,7 +145,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         helpers.extend(quote! {
             #[doc(hidden)]
             #[inline(always)]
-            #[allow(unused_braces)]
+            #[allow(unused_braces, unused_parens)]
             fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
                 #bind
                 #body
@@ -158,7 +163,7 @@ pub fn generate(c: &Checked) -> TokenStream {
             helpers.extend(quote! {
                 #[doc(hidden)]
                 #[inline(always)]
-                #[allow(unused_braces)]
+                #[allow(unused_braces, unused_parens)]
                 fn #name<#d: #scalar_bound>(&self, #time_param #dq: &[#d; #n], #dv: &[#d; #n] #index) -> #d {
                     #t_bind
                     #bind
@@ -185,7 +190,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         force_method = if timed {
             quote! {
                 #[inline]
-                #[allow(unused_braces)]
+                #[allow(unused_braces, unused_parens)]
                 fn force_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
                     #body
                 }
@@ -197,7 +202,7 @@ pub fn generate(c: &Checked) -> TokenStream {
         } else {
             quote! {
                 #[inline]
-                #[allow(unused_braces)]
+                #[allow(unused_braces, unused_parens)]
                 fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
                     #body
                 }
@@ -215,7 +220,7 @@ pub fn generate(c: &Checked) -> TokenStream {
     });
     // A driven model keeps the runtime's general kernels (they take `t`), and their stack
     // bound; an autonomous one gets the specialised kernels.
-    let kernels_and_stack = (!timed).then(|| {
+    let kernels_and_stack = (!timed && !through).then(|| {
         let (kernels, stack) = kernels(c);
         let stack_bytes = stack
             .into_iter()
@@ -249,6 +254,14 @@ pub fn generate(c: &Checked) -> TokenStream {
         }
     });
 
+    let (split_items, sparse_impl) = match split {
+        Some(s) => {
+            helpers.extend(crate::sparse::helpers(c, s));
+            (crate::sparse::trait_items(c), crate::sparse::sparse_impl(c))
+        }
+        None => (TokenStream::new(), TokenStream::new()),
+    };
+
     quote! {
         #item
 
@@ -271,7 +284,10 @@ pub fn generate(c: &Checked) -> TokenStream {
             }
             #check_model
             #kernels_and_stack
+            #split_items
         }
+
+        #sparse_impl
 
         #[automatically_derived]
         impl #ig #ident #tg #wc {

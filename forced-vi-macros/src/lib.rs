@@ -3,8 +3,9 @@
 //! specialised `ForcedLagrangian` impl. Use it through `forced_vi::forced_lagrangian`.
 //!
 //! The crate is split by phase: `ast` parses, `check` validates and analyses (with `lower`
-//! for expressions and `poly` for symbolic polynomials), `expand` generates, and `fallback`
-//! pairs the errors with a stub impl.
+//! for expressions, `poly` for symbolic polynomials and `split` for local terms), `expand`
+//! generates (with `sparse` for the per-term kernels), and `fallback` pairs the errors with
+//! a stub impl.
 #![warn(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
@@ -17,6 +18,8 @@ mod lower;
 mod poly;
 #[cfg(test)]
 mod props;
+mod sparse;
+mod split;
 
 use proc_macro::TokenStream;
 

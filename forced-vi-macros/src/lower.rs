@@ -274,7 +274,7 @@ impl Lowered {
     }
     /// An integer as an `f64` expression (`2` → `2.0`, `i` → `(i as f64)`); other kinds as
     /// they are.
-    fn as_real(&self) -> TokenStream {
+    pub fn as_real(&self) -> TokenStream {
         if self.kind != Kind::Int {
             return self.operand();
         }

@@ -1,0 +1,274 @@
+//! Generates the per-term kernels of a model that [`split`](crate::split) into local terms
+//! (DESIGN §9): one generic function per term of `L` and per force entry, over only the
+//! slots it reads; the hidden kernel `__fvi_sparse`, which loops over the terms and
+//! scatters each term's small gradient and Hessian through an `Accum`; `impl SparseNode`;
+//! and, for large models, the dense kernels through the same code.
+//!
+//! The term functions are generic over `__D: Scalar` like the rest of the generated code,
+//! so a type error in the user's expression is reported once, not once per dual type.
+
+use proc_macro2::{Span, TokenStream};
+use quote::{format_ident, quote};
+use syn::Ident;
+
+use crate::check::Checked;
+use crate::lower::{Len, TIME};
+use crate::split::{Local, Split};
+
+fn fvi() -> TokenStream {
+    quote!(::forced_vi::__private)
+}
+
+/// Up to this many coordinates, a model with a literal length keeps its dense kernels
+/// (symbolic polynomials and small dual numbers, the fastest for small models).
+const DENSE_LITERAL_MAX: usize = 32;
+
+/// Whether the dense kernels go through the per-term code too: for a const-generic or a
+/// large length, where the whole-model dual numbers would be `N × N` (or larger) types.
+pub fn dense_through_split(c: &Checked) -> bool {
+    match c.n {
+        Len::Param(_) => true,
+        Len::Lit(n) => n > DENSE_LITERAL_MAX,
+    }
+}
+
+/// The inherent items: one generic function per term and force entry, and `__fvi_sparse`.
+pub fn helpers(c: &Checked, s: &Split) -> TokenStream {
+    let fvi = fvi();
+    let mut out = TokenStream::new();
+    let mut calls = TokenStream::new();
+    for (k, t) in s.terms.iter().enumerate() {
+        let name = format_ident!("__fvi_s{}", k);
+        out.extend(term_fn(c, t, &name));
+        calls.extend(term_call(t, &name));
+    }
+    for (k, f) in s.forces.iter().enumerate() {
+        let name = format_ident!("__fvi_sf{}", k);
+        out.extend(term_fn(c, f, &name));
+        calls.extend(force_call(f, &name));
+    }
+    out.extend(quote! {
+        #[doc(hidden)]
+        #[inline]
+        #[allow(unused_variables, unused_parens, unused_braces)]
+        fn __fvi_sparse<__A: #fvi::Accum>(
+            &self,
+            __fvi_time: f64,
+            __fvi_qa: &[f64],
+            __fvi_va: &[f64],
+            __fvi_acc: &mut __A,
+        ) {
+            let __fvi_blocks = #fvi::Accum::wants_blocks(__fvi_acc);
+            #calls
+        }
+    });
+    out
+}
+
+/// `fn name<__D>(&self, t, [i,] z) -> __D`: the term (times its weight) at the slots `z`.
+fn term_fn(c: &Checked, l: &Local, name: &Ident) -> TokenStream {
+    let fvi = fvi();
+    let k = l.slots.len();
+    let params = &c.env.params;
+    let var = l.lp.as_ref().map(|(v, _)| quote!(#v: usize,));
+    let binds = l.slots.iter().enumerate().map(|(j, s)| {
+        let id = &s.ident;
+        quote!(let #id: __D = __fvi_z[#j];)
+    });
+    let time = Ident::new(TIME, Span::call_site());
+    let t_bind = l
+        .uses_time
+        .then(|| quote!(let #time: __D = __D::from(__fvi_time);));
+    let body = &l.body;
+    let weighted = match &l.weight {
+        Some(w) => quote!(__fvi_val * (#w)),
+        None => quote!(__fvi_val),
+    };
+    quote! {
+        #[doc(hidden)]
+        #[inline(always)]
+        #[allow(unused_variables, unused_braces, unused_parens, non_snake_case)]
+        fn #name<__D: #fvi::Scalar>(&self, __fvi_time: f64, #var __fvi_z: &[__D; #k]) -> __D {
+            #( let #params: f64 = self.#params; )*
+            #(#binds)*
+            #t_bind
+            let __fvi_val: __D = #body;
+            #weighted
+        }
+    }
+}
+
+/// The slot arrays and values of a term.
+fn prelude(l: &Local) -> TokenStream {
+    let fvi = fvi();
+    let k = l.slots.len();
+    let index = l.slots.iter().map(|s| &s.index);
+    let vel = l.slots.iter().map(|s| s.vel);
+    quote! {
+        let __fvi_s: [usize; #k] = [#(#index),*];
+        let __fvi_vel: [bool; #k] = [#(#vel),*];
+        let __fvi_x = #fvi::slot_values(__fvi_qa, __fvi_va, &__fvi_s, &__fvi_vel);
+    }
+}
+
+fn looped(l: &Local, inner: TokenStream) -> TokenStream {
+    match &l.lp {
+        Some((var, iter)) => quote!(for #var in #iter { #inner }),
+        None => quote!({ #inner }),
+    }
+}
+
+/// The call of `name` at the slots `z` for the dual type `ty`.
+fn call(l: &Local, name: &Ident, ty: TokenStream) -> TokenStream {
+    let var = l.lp.as_ref().map(|(v, _)| quote!(#v,));
+    quote!(self.#name::<#ty>(__fvi_time, #var &::core::convert::Into::into(__fvi_z)))
+}
+
+fn term_call(l: &Local, name: &Ident) -> TokenStream {
+    let fvi = fvi();
+    let nd = quote!(#fvi::num_dual);
+    let k = l.slots.len();
+    let prelude = prelude(l);
+    let hess = call(l, name, quote!(#nd::Dual2SVec64<#k>));
+    let grad = call(l, name, quote!(#nd::DualSVec64<#k>));
+    looped(
+        l,
+        quote! {
+            #prelude
+            if __fvi_blocks {
+                let (_, __fvi_g, __fvi_h) = #nd::hessian(
+                    |__fvi_z: #fvi::SVector<#nd::Dual2SVec64<#k>, #k>| #hess,
+                    &__fvi_x,
+                );
+                #fvi::add_term(__fvi_acc, &__fvi_s, &__fvi_vel, &__fvi_g, ::core::option::Option::Some(&__fvi_h));
+            } else {
+                let (_, __fvi_g) = #nd::gradient(
+                    |__fvi_z: #fvi::SVector<#nd::DualSVec64<#k>, #k>| #grad,
+                    &__fvi_x,
+                );
+                #fvi::add_term(__fvi_acc, &__fvi_s, &__fvi_vel, &__fvi_g, ::core::option::Option::None);
+            }
+        },
+    )
+}
+
+fn force_call(l: &Local, name: &Ident) -> TokenStream {
+    let fvi = fvi();
+    let nd = quote!(#fvi::num_dual);
+    let k = l.slots.len();
+    let prelude = prelude(l);
+    let row = &l.row;
+    let grad = call(l, name, quote!(#nd::DualSVec64<#k>));
+    let value = call(l, name, quote!(f64));
+    let blocks = (k > 0).then(|| {
+        quote! {
+            if __fvi_blocks {
+                let (__fvi_f, __fvi_g) = #nd::gradient(
+                    |__fvi_z: #fvi::SVector<#nd::DualSVec64<#k>, #k>| #grad,
+                    &__fvi_x,
+                );
+                #fvi::add_force(__fvi_acc, __fvi_row, &__fvi_s, &__fvi_vel, __fvi_f, ::core::option::Option::Some(&__fvi_g));
+                continue;
+            }
+        }
+    });
+    let inner = quote! {
+        let __fvi_row: usize = #row;
+        #prelude
+        #blocks
+        let __fvi_z = __fvi_x;
+        let __fvi_f: f64 = #value;
+        #fvi::add_force(__fvi_acc, __fvi_row, &__fvi_s, &__fvi_vel, __fvi_f, ::core::option::Option::None);
+    };
+    // One pass of a loop, so that `continue` leaves a force entry without an index too.
+    match &l.lp {
+        Some(_) => looped(l, inner),
+        None => quote!(for _ in 0..1 { #inner }),
+    }
+}
+
+/// `impl SparseNode` for the model.
+pub fn sparse_impl(c: &Checked) -> TokenStream {
+    let fvi = fvi();
+    let item = &c.model.item;
+    let ident = &item.ident;
+    let (ig, tg, wc) = item.generics.split_for_impl();
+    let n = &c.n;
+    quote! {
+        #[automatically_derived]
+        impl #ig #fvi::SparseNode for #ident #tg #wc {
+            fn dof(&self) -> usize {
+                #n
+            }
+            fn eval(&self, __fvi_t: f64, __fvi_q: &[f64], __fvi_v: &[f64], __fvi_sink: &mut #fvi::NodeSink<'_>) {
+                self.__fvi_sparse(__fvi_t, __fvi_q, __fvi_v, __fvi_sink);
+            }
+            fn lagrangian_value(&self, __fvi_t: f64, __fvi_q: &[f64], __fvi_v: &[f64]) -> f64 {
+                match (
+                    <&[f64; #n] as ::core::convert::TryFrom<&[f64]>>::try_from(__fvi_q),
+                    <&[f64; #n] as ::core::convert::TryFrom<&[f64]>>::try_from(__fvi_v),
+                ) {
+                    (::core::result::Result::Ok(__fvi_q), ::core::result::Result::Ok(__fvi_v)) => {
+                        <Self as #fvi::ForcedLagrangian<#n>>::lagrangian_at::<f64>(self, __fvi_t, __fvi_q, __fvi_v)
+                    }
+                    _ => f64::NAN,
+                }
+            }
+        }
+    }
+}
+
+/// Items of the `ForcedLagrangian` impl: `sparse_node`, and with [`dense_through_split`] the
+/// dense kernels (through the per-term code) with their stack bound.
+pub fn trait_items(c: &Checked) -> TokenStream {
+    let fvi = fvi();
+    let n = &c.n;
+    let mut out = quote! {
+        fn sparse_node(&self) -> ::core::option::Option<&dyn #fvi::SparseNode> {
+            ::core::option::Option::Some(self)
+        }
+    };
+    if dense_through_split(c) {
+        out.extend(quote!(const KERNEL_STACK_BYTES: usize = #fvi::split_stack_bytes::<#n>();));
+        out.extend(dense_kernels(c, "", false));
+        if c.uses_time {
+            out.extend(dense_kernels(c, "_at", true));
+        }
+    }
+    out
+}
+
+/// `node_gradient`, `node_jacobian` and `mass_matrix` (with `_at` and a time argument when
+/// `timed`) through the per-term code and dense blocks.
+fn dense_kernels(c: &Checked, suffix: &str, timed: bool) -> TokenStream {
+    let fvi = fvi();
+    let n = &c.n;
+    let g = format_ident!("node_gradient{}", suffix);
+    let j = format_ident!("node_jacobian{}", suffix);
+    let m = format_ident!("mass_matrix{}", suffix);
+    let (t_param, t_arg, t) = if timed {
+        (quote!(__fvi_t: f64,), quote!(__fvi_t,), quote!(__fvi_t))
+    } else {
+        (TokenStream::new(), TokenStream::new(), quote!(0.0))
+    };
+    let sig = quote!(&self, #t_param __fvi_qs: &#fvi::SVector<f64, #n>, __fvi_vs: &#fvi::SVector<f64, #n>);
+    let args = quote!(#t, __fvi_qs.as_slice(), __fvi_vs.as_slice());
+    quote! {
+        #[inline]
+        fn #g(#sig) -> #fvi::NodeGradient<#n> {
+            let mut __fvi_g = #fvi::zero_gradient::<#n>();
+            self.__fvi_sparse(#args, &mut #fvi::DenseAccum::gradient(&mut __fvi_g));
+            __fvi_g
+        }
+        #[inline]
+        fn #j(#sig) -> #fvi::NodeJacobian<#n> {
+            let mut __fvi_j = #fvi::zero_jacobian::<#n>();
+            self.__fvi_sparse(#args, &mut #fvi::DenseAccum::jacobian(&mut __fvi_j));
+            __fvi_j
+        }
+        #[inline]
+        fn #m(#sig) -> #fvi::SMatrix<f64, #n, #n> {
+            <Self as #fvi::ForcedLagrangian<#n>>::#j(self, #t_arg __fvi_qs, __fvi_vs).e
+        }
+    }
+}
