@@ -79,6 +79,38 @@ struct Driven<const N: usize> {
     a: f64,
 }
 
+/// A 4 × 4 membrane (nested index sums, 2-D indices), literal length.
+#[forced_lagrangian(
+    coordinates(q: [f64; 16]),
+    lagrangian = (0..16).map(|k| 0.5 * q_dot[k] * q_dot[k]).sum()
+        - 0.5 * k * (0..4).map(|i| (0..3).map(|j| (q[i * 4 + j + 1] - q[i * 4 + j]).powi(2)).sum()).sum()
+        - 0.5 * k * (0..3).map(|i| (0..4).map(|j| (q[(i + 1) * 4 + j] - q[i * 4 + j]).powi(2)).sum()).sum()
+        - 0.25 * b * (0..16).map(|k| q[k].powi(4)).sum(),
+    force(q[i] = -c * q_dot[i]),
+)]
+struct Lattice {
+    k: f64,
+    b: f64,
+    c: f64,
+}
+
+/// A `W × W` membrane with const-generic sizes, each mass tied to its right and lower
+/// neighbours (and the rows wrap, with an index past the end at the last mass).
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|k| 0.5 * q_dot[k] * q_dot[k]).sum()
+        - (0..W).map(|i| (0..W).map(|j| {
+            let right = if j + 1 < W { q[i * W + j + 1] } else { 0.0 };
+            let down = if i + 1 < W { q[(i + 1) * W + j] } else { 0.0 };
+            0.5 * k * ((right - q[i * W + j]).powi(2) + (down - q[i * W + j]).powi(2))
+        }).sum()).sum(),
+    force(q[i] = -c * q_dot[i] * (1.0 + q[i] * q[i])),
+)]
+struct Membrane<const W: usize, const N: usize> {
+    k: f64,
+    c: f64,
+}
+
 /// A whole-array term (a sum used nonlinearly): no split, no `SparseNode`.
 #[forced_lagrangian(
     coordinates(q: [f64; N]),
@@ -274,6 +306,22 @@ fn driven_chain_matches_dense() {
         a: 0.5,
     };
     on_big_stack(move || run::<6>(|q, v, t| compare(&m, t, q, v)));
+}
+
+#[test]
+fn lattice_with_nested_sums_matches_dense() {
+    let m = Lattice {
+        k: 1.2,
+        b: 0.3,
+        c: 0.05,
+    };
+    on_big_stack(move || run::<16>(|q, v, _| compare(&m, 0.0, q, v)));
+}
+
+#[test]
+fn const_generic_membrane_matches_dense() {
+    let m = Membrane::<3, 9> { k: 0.8, c: 0.1 };
+    on_big_stack(move || run::<9>(|q, v, _| compare(&m, 0.0, q, v)));
 }
 
 #[test]

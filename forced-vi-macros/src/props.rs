@@ -25,7 +25,20 @@ const MODELS: &[(&str, &str)] = &[
         "coordinates(th), lagrangian = { let yd = -a * w * (w * t).sin(); 0.5 * (th_dot * th_dot + 2 * th.sin() * th_dot * yd) - a * (w * t).cos() + th.cos() }, force(th = -c * th_dot + (w * t).cos())",
         "struct K { a: f64, w: f64, c: f64 }",
     ),
+    // Sum-shaped models that split into local terms (DESIGN §9): `for` accumulations,
+    // constant factors, guarded and periodic neighbours, a flattened 2-D grid, time.
+    (
+        "coordinates(q: [f64; N]), lagrangian = { let mut s = 0.0; for i in 0..N { let w = 1.0 + q[i] * q[i]; s += 0.5 * w * q_dot[i] * q_dot[i]; } s } - k * (1..N).map(|i| (q[i] - q[i - 1]).powi(2)).sum() / 2.0 - 0.5 * k * (0..N).map(|i| (q[i] - q[(i + N - 2) % N]).cosh()).sum(), force(q[i] = -c * q_dot[i] * (1.0 + q[(i + 1) % N] * q[(i + 1) % N]) + if i + 1 < N { c * q_dot[i + 1] } else { 0.0 })",
+        "struct R<const N: usize> { k: f64, c: f64 }",
+    ),
+    (
+        "coordinates(x, q: [f64; 16]), lagrangian = 0.5 * x_dot * x_dot + (0..16).map(|k| 0.5 * q_dot[k] * q_dot[k]).sum() - (0..12usize).map(|k| (q[k + 4] - q[k]).powi(2)).sum() - (0..16usize).map(|k| if k % 4 == 3 { 0.0 } else { (q[k + 1] - q[k]).powi(2) }).sum() - g * x * q[0], force(x = -c * x_dot + (w * t).sin(), q[i] = -c * q_dot[i] * (w * t).cos())",
+        "struct G { g: f64, c: f64, w: f64 }",
+    ),
 ];
+
+/// The seeds above that split into local terms (the last two and the spring chain).
+const SPLIT: &[usize] = &[1, 4, 5];
 
 #[derive(Clone, Debug)]
 enum Tok {
@@ -225,6 +238,18 @@ fn trust_valid_models_expand() {
         };
         let out = super::entry(args, item).to_string();
         assert!(!out.contains("compile_error"), "{out}");
+    }
+    for &k in SPLIT {
+        let (args, item) = MODELS[k];
+        let (Ok(args), Ok(item)) = (TokenStream::from_str(args), TokenStream::from_str(item))
+        else {
+            panic!("the seed models parse");
+        };
+        let out = super::entry(args, item).to_string();
+        assert!(
+            out.contains("SparseNode for"),
+            "seed {k} does not split: {out}"
+        );
     }
 }
 

@@ -70,7 +70,7 @@ fn term_fn(c: &Checked, l: &Local, name: &Ident) -> TokenStream {
     let fvi = fvi();
     let k = l.slots.len();
     let params = &c.env.params;
-    let var = l.lp.as_ref().map(|(v, _)| quote!(#v: usize,));
+    let var = l.loops.iter().map(|(v, _)| quote!(#v: usize,));
     let binds = l.slots.iter().enumerate().map(|(j, s)| {
         let id = &s.ident;
         quote!(let #id: __D = __fvi_z[#j];)
@@ -88,7 +88,7 @@ fn term_fn(c: &Checked, l: &Local, name: &Ident) -> TokenStream {
         #[doc(hidden)]
         #[inline(always)]
         #[allow(unused_variables, unused_braces, unused_parens, non_snake_case)]
-        fn #name<__D: #fvi::Scalar>(&self, __fvi_time: f64, #var __fvi_z: &[__D; #k]) -> __D {
+        fn #name<__D: #fvi::Scalar>(&self, __fvi_time: f64, #(#var)* __fvi_z: &[__D; #k]) -> __D {
             #( let #params: f64 = self.#params; )*
             #(#binds)*
             #t_bind
@@ -112,16 +112,16 @@ fn prelude(l: &Local) -> TokenStream {
 }
 
 fn looped(l: &Local, inner: TokenStream) -> TokenStream {
-    match &l.lp {
-        Some((var, iter)) => quote!(for #var in #iter { #inner }),
-        None => quote!({ #inner }),
-    }
+    l.loops.iter().rev().fold(
+        quote!({ #inner }),
+        |body, (var, iter)| quote!({ for #var in #iter #body }),
+    )
 }
 
 /// The call of `name` at the slots `z` for the dual type `ty`.
 fn call(l: &Local, name: &Ident, ty: TokenStream) -> TokenStream {
-    let var = l.lp.as_ref().map(|(v, _)| quote!(#v,));
-    quote!(self.#name::<#ty>(__fvi_time, #var &::core::convert::Into::into(__fvi_z)))
+    let var = l.loops.iter().map(|(v, _)| v);
+    quote!(self.#name::<#ty>(__fvi_time, #(#var,)* &::core::convert::Into::into(__fvi_z)))
 }
 
 fn term_call(l: &Local, name: &Ident) -> TokenStream {
@@ -181,9 +181,10 @@ fn force_call(l: &Local, name: &Ident) -> TokenStream {
         #fvi::add_force(__fvi_acc, __fvi_row, &__fvi_s, &__fvi_vel, __fvi_f, ::core::option::Option::None);
     };
     // One pass of a loop, so that `continue` leaves a force entry without an index too.
-    match &l.lp {
-        Some(_) => looped(l, inner),
-        None => quote!(for _ in 0..1 { #inner }),
+    if l.loops.is_empty() {
+        quote!(for _ in 0..1 { #inner })
+    } else {
+        looped(l, inner)
     }
 }
 

@@ -36,8 +36,8 @@ pub struct Split {
 
 /// One term of `L`, or one force entry (then `row` is its component's index).
 pub struct Local {
-    /// `for var in iter` around the term, if it is an index sum.
-    pub lp: Option<(Ident, TokenStream)>,
+    /// `for var in iter` loops around the term, outermost first (none for a fixed term).
+    pub loops: Vec<(Ident, TokenStream)>,
     /// The constant factor (sign included), an `f64` expression; `None` for 1.
     pub weight: Option<TokenStream>,
     /// For a force entry: its component, a `usize` expression.
@@ -58,8 +58,9 @@ pub struct Slot {
 }
 
 /// A loop around a term: the variable, the iterator's tokens and the values it takes.
-struct Loop<'e> {
-    var: &'e Ident,
+#[derive(Clone)]
+struct Loop {
+    var: Ident,
     iter: TokenStream,
     range: Option<IntRange>,
 }
@@ -69,7 +70,7 @@ pub fn split(c: &Checked) -> Option<Split> {
     let (_, l) = c.model.lagrangian.as_ref()?;
     let a = Analysis { env: &c.env };
     let mut terms = Vec::new();
-    a.decompose(l, &[], &mut terms)?;
+    a.decompose(l, &[], &[], &mut terms)?;
     let mut forces = Vec::new();
     if let Some(force) = &c.force {
         for f in &force.fns {
@@ -84,78 +85,106 @@ struct Analysis<'a> {
 }
 
 impl Analysis<'_> {
-    /// Splits `e`, scaled by the product of `weight`, into terms (an empty factor is `-1`).
-    fn decompose(&self, e: &Expr, weight: &[TokenStream], out: &mut Vec<Local>) -> Option<()> {
+    /// Splits `e`, scaled by the product of `weight`, into terms (an empty factor is `-1`),
+    /// inside `loops`.
+    fn decompose(
+        &self,
+        e: &Expr,
+        loops: &[Loop],
+        weight: &[TokenStream],
+        out: &mut Vec<Local>,
+    ) -> Option<()> {
         let with = |f: TokenStream| -> Vec<TokenStream> {
             let mut w = weight.to_vec();
             w.push(f);
             w
         };
+        let within = |lp: Loop| -> Vec<Loop> {
+            let mut l = loops.to_vec();
+            l.push(lp);
+            l
+        };
+        let neg = TokenStream::new;
         match e {
-            Expr::Paren(p) => self.decompose(&p.expr, weight, out),
-            Expr::Group(g) => self.decompose(&g.expr, weight, out),
+            Expr::Paren(p) => self.decompose(&p.expr, loops, weight, out),
+            Expr::Group(g) => self.decompose(&g.expr, loops, weight, out),
             Expr::Unary(u) if matches!(u.op, UnOp::Neg(_)) => {
-                self.decompose(&u.expr, &with(TokenStream::new()), out)
+                self.decompose(&u.expr, loops, &with(neg()), out)
             }
             Expr::Binary(b) => match b.op {
-                BinOp::Add(_) => {
-                    self.decompose(&b.left, weight, out)?;
-                    self.decompose(&b.right, weight, out)
+                BinOp::Add(_) | BinOp::Sub(_) => {
+                    let right = if matches!(b.op, BinOp::Sub(_)) {
+                        with(neg())
+                    } else {
+                        weight.to_vec()
+                    };
+                    self.decompose(&b.left, loops, weight, out)?;
+                    self.decompose(&b.right, loops, &right, out)
                 }
-                BinOp::Sub(_) => {
-                    self.decompose(&b.left, weight, out)?;
-                    self.decompose(&b.right, &with(TokenStream::new()), out)
-                }
-                BinOp::Mul(_) => match (self.constant(&b.left), self.constant(&b.right)) {
-                    (Some(f), _) => self.decompose(&b.right, &with(f), out),
-                    (None, Some(f)) => self.decompose(&b.left, &with(f), out),
-                    _ => self.leaf(e, None, weight, out),
+                BinOp::Mul(_) => match (
+                    self.constant(&b.left, loops),
+                    self.constant(&b.right, loops),
+                ) {
+                    (Some(f), _) => self.decompose(&b.right, loops, &with(f), out),
+                    (None, Some(f)) => self.decompose(&b.left, loops, &with(f), out),
+                    _ => self.leaf(e, loops, weight, out),
                 },
-                BinOp::Div(_) => match self.constant(&b.right) {
-                    Some(f) => self.decompose(&b.left, &with(quote!(1.0 / #f)), out),
-                    None => self.leaf(e, None, weight, out),
+                BinOp::Div(_) => match self.constant(&b.right, loops) {
+                    Some(f) => self.decompose(&b.left, loops, &with(quote!(1.0 / #f)), out),
+                    None => self.leaf(e, loops, weight, out),
                 },
-                _ => self.leaf(e, None, weight, out),
+                _ => self.leaf(e, loops, weight, out),
             },
             Expr::MethodCall(m) if m.method == "sum" && m.args.is_empty() => {
-                match self.index_sum(m) {
-                    Some((lp, body)) => self.leaf(body, Some(lp), weight, out),
-                    None => self.leaf(e, None, weight, out),
+                match self.index_sum(m, loops) {
+                    Some((lp, body)) => self.decompose(body, &within(lp), weight, out),
+                    None => self.leaf(e, loops, weight, out),
                 }
             }
             Expr::Block(b) if b.label.is_none() => match accumulation(&b.block) {
                 Some(parts) => {
                     for (var_iter, body, negative) in parts {
                         let w = if negative {
-                            with(TokenStream::new())
+                            with(neg())
                         } else {
                             weight.to_vec()
                         };
-                        let lp = match var_iter {
-                            Some((var, iter)) => Some(self.iterator(var, iter, &body)?),
-                            None => None,
-                        };
-                        self.leaf(&body, lp, &w, out)?;
+                        match var_iter {
+                            Some((var, iter)) => {
+                                let lp = self.iterator(var, iter, &body, loops)?;
+                                self.decompose(&body, &within(lp), &w, out)?;
+                            }
+                            None => self.decompose(&body, loops, &w, out)?,
+                        }
                     }
                     Some(())
                 }
-                None => self.leaf(e, None, weight, out),
+                None => self.leaf(e, loops, weight, out),
             },
-            _ => self.leaf(e, None, weight, out),
+            _ => self.leaf(e, loops, weight, out),
         }
     }
 
-    /// An `f64` constant (literals and parameters, no coordinate and no time) as tokens.
-    fn constant(&self, e: &Expr) -> Option<TokenStream> {
-        let l = quietly(self.env, None, |lw| lw.expr(e))?;
+    /// An `f64` constant (literals, parameters and loop variables, no coordinate and no
+    /// time) as tokens.
+    fn constant(&self, e: &Expr, loops: &[Loop]) -> Option<TokenStream> {
+        let l = quietly(self.env, loops, |lw| lw.expr(e))?;
+        // Only parameters by name: not the time, nor a coordinate array (`q.len()`).
         let constant = matches!(l.kind, Kind::Real | Kind::Int)
             && l.uses.is_empty()
-            && !l.names.contains(TIME);
+            && l.names
+                .iter()
+                .all(|n| self.env.params.iter().any(|p| p == n))
+            && !mentions_coordinate(self.env, e);
         constant.then(|| l.as_real()).filter(|t| !t.is_empty())
     }
 
     /// `iter.map(|i| body).sum()`: the loop and the body.
-    fn index_sum<'e>(&self, m: &'e syn::ExprMethodCall) -> Option<(Loop<'e>, &'e Expr)> {
+    fn index_sum<'e>(
+        &self,
+        m: &'e syn::ExprMethodCall,
+        loops: &[Loop],
+    ) -> Option<(Loop, &'e Expr)> {
         if m.turbofish.is_some() {
             return None;
         }
@@ -173,30 +202,38 @@ impl Analysis<'_> {
         }
         let var = pat_ident(closure.inputs.first()?)?;
         let body = &*closure.body;
-        Some((self.iterator(var, &map.receiver, body)?, body))
+        Some((self.iterator(var, &map.receiver, body, loops)?, body))
     }
 
     /// A loop over `iter`: integers that depend on nothing but constants, and of type
     /// `usize` in the dense code too (the per-term kernels take the loop variable as a
     /// `usize`).
-    fn iterator<'e>(&self, var: &'e Ident, iter: &Expr, body: &Expr) -> Option<Loop<'e>> {
-        let l = quietly(self.env, None, |lw| lw.expr(iter))?;
+    fn iterator(&self, var: &Ident, iter: &Expr, body: &Expr, loops: &[Loop]) -> Option<Loop> {
+        if loops.iter().any(|l| l.var == *var) {
+            return None;
+        }
+        if mentions_coordinate(self.env, iter) {
+            return None;
+        }
+        let l = quietly(self.env, loops, |lw| lw.expr(iter))?;
         if l.kind != Kind::Iter(Box::new(Kind::Int)) || !l.uses.is_empty() || !l.names.is_empty() {
             return None;
         }
         let lp = Loop {
-            var,
+            var: var.clone(),
             iter: l.tokens,
             range: l.range,
         };
-        self.loop_var_is_usize(&lp, iter, body).then_some(lp)
+        let mut all = loops.to_vec();
+        all.push(lp.clone());
+        self.loop_var_is_usize(&all, iter, body).then_some(lp)
     }
 
     /// Whether the dense code's loop variable is certainly a `usize`: a bound of the range
-    /// is a const parameter (a `usize`), or the body indexes a coordinate array with an
+    /// is a const parameter or a `usize` literal, or the body indexes a coordinate array with an
     /// expression of the variable that the dense lowering proves in range (a plain
     /// `q[...]`, whose index is a `usize`). Otherwise its type is Rust's inference's choice.
-    fn loop_var_is_usize(&self, lp: &Loop<'_>, iter: &Expr, body: &Expr) -> bool {
+    fn loop_var_is_usize(&self, loops: &[Loop], iter: &Expr, body: &Expr) -> bool {
         let mut range = iter;
         let bounds = loop {
             match range {
@@ -209,13 +246,15 @@ impl Analysis<'_> {
         let by_const = [&bounds.start, &bounds.end]
             .into_iter()
             .flatten()
-            .any(|b| self.env.const_params.iter().any(|p| mentions(b, p)));
+            .any(|b| self.env.const_params.iter().any(|p| mentions(b, p)) || usize_literal(b));
         if by_const {
             return true;
         }
-        let var = lp.var;
-        let indexed = IndexedBy::find(body, var);
-        let unproven = quietly(self.env, Some((var, lp.range)), |lw| {
+        let Some(lp) = loops.last() else {
+            return false;
+        };
+        let indexed = IndexedBy::find(body, &lp.var);
+        let unproven = quietly(self.env, loops, |lw| {
             let _ = lw.expr(body);
             lw.checked_index.get()
         });
@@ -226,11 +265,11 @@ impl Analysis<'_> {
     fn leaf(
         &self,
         body: &Expr,
-        lp: Option<Loop<'_>>,
+        loops: &[Loop],
         weight: &[TokenStream],
         out: &mut Vec<Local>,
     ) -> Option<()> {
-        let local = self.local(body, lp.as_ref(), weight)?;
+        let local = self.local(body, loops, weight)?;
         // A term that reads no coordinate has no derivatives (its value is in `L` itself).
         if !local.slots.is_empty() {
             out.push(local);
@@ -239,14 +278,14 @@ impl Analysis<'_> {
     }
 
     /// The slots and the lowered body of a term.
-    fn local(&self, body: &Expr, lp: Option<&Loop<'_>>, weight: &[TokenStream]) -> Option<Local> {
-        let var = lp.map(|l| l.var);
-        if !binders_ok(self.env, body, var) {
+    fn local(&self, body: &Expr, loops: &[Loop], weight: &[TokenStream]) -> Option<Local> {
+        let vars: Vec<Ident> = loops.iter().map(|l| l.var.clone()).collect();
+        if !binders_ok(self.env, body, &vars) {
             return None;
         }
         let mut rw = Rewrite {
             env: self.env,
-            var,
+            vars,
             keys: Vec::new(),
             ok: true,
         };
@@ -256,8 +295,7 @@ impl Analysis<'_> {
             return None;
         }
         let env = rw.synthetic_env();
-        let range = lp.and_then(|l| l.range);
-        let lowered = quietly(&env, var.map(|v| (v, range)), |lw| {
+        let lowered = quietly(&env, loops, |lw| {
             let index: Vec<Option<Lowered>> = rw
                 .keys
                 .iter()
@@ -311,7 +349,10 @@ impl Analysis<'_> {
             (None, false) => None,
         };
         Some(Local {
-            lp: lp.map(|l| (l.var.clone(), l.iter.clone())),
+            loops: loops
+                .iter()
+                .map(|l| (l.var.clone(), l.iter.clone()))
+                .collect(),
             weight,
             row: None,
             slots,
@@ -331,7 +372,7 @@ impl Analysis<'_> {
             (e, None) => e,
             _ => return None,
         };
-        let (lp, row) = match (&f.index, f.element) {
+        let (loops, row) = match (&f.index, f.element) {
             (Some(i), _) => {
                 let range = len.literal().and_then(|n| {
                     Some(IntRange {
@@ -341,31 +382,27 @@ impl Analysis<'_> {
                     })
                 });
                 let lp = Loop {
-                    var: i,
+                    var: i.clone(),
                     iter: quote!(0usize..#len),
                     range,
                 };
-                (Some(lp), quote!(#offset + #i))
+                (vec![lp], quote!(#offset + #i))
             }
-            (None, Some(k)) => (None, quote!(#offset + #k)),
-            (None, None) => (None, quote!(#offset)),
+            (None, Some(k)) => (Vec::new(), quote!(#offset + #k)),
+            (None, None) => (Vec::new(), quote!(#offset)),
         };
-        let mut local = self.local(value, lp.as_ref(), &[])?;
+        let mut local = self.local(value, &loops, &[])?;
         local.row = Some(row);
         Some(local)
     }
 }
 
 /// Lowers with errors discarded; `None` if the lowering reported any.
-fn quietly<T>(
-    env: &Env,
-    index: Option<(&Ident, Option<IntRange>)>,
-    f: impl FnOnce(&mut Lowerer<'_>) -> T,
-) -> Option<T> {
+fn quietly<T>(env: &Env, loops: &[Loop], f: impl FnOnce(&mut Lowerer<'_>) -> T) -> Option<T> {
     let cx = Ctxt::default();
     let mut lw = Lowerer::new(&cx, env, "a term");
-    if let Some((var, range)) = index {
-        lw.bind_index(var, range);
+    for l in loops {
+        lw.bind_index(&l.var, l.range);
     }
     let out = f(&mut lw);
     cx.check().ok().map(|()| out)
@@ -445,6 +482,15 @@ fn accumulate<'e>(s: &'e Stmt, acc: &Ident) -> Option<(&'e Expr, bool)> {
     (is_acc && !mentions(&b.right, acc)).then_some((&*b.right, negative))
 }
 
+/// A `usize`-suffixed integer literal (through parentheses).
+fn usize_literal(e: &Expr) -> bool {
+    match e {
+        Expr::Paren(p) => usize_literal(&p.expr),
+        Expr::Lit(l) => matches!(&l.lit, syn::Lit::Int(i) if i.suffix() == "usize"),
+        _ => false,
+    }
+}
+
 /// Whether some coordinate index in an expression mentions a variable.
 struct IndexedBy<'a> {
     var: &'a Ident,
@@ -464,6 +510,14 @@ impl<'ast> Visit<'ast> for IndexedBy<'_> {
         self.found |= mentions(&i.index, self.var);
         syn::visit::visit_expr_index(self, i);
     }
+}
+
+/// Whether a coordinate or velocity is named in `e` (even where the lowering forgets it,
+/// as in `q.len()`).
+fn mentions_coordinate(env: &Env, e: &Expr) -> bool {
+    env.groups
+        .iter()
+        .any(|g| mentions(e, &g.name) || mentions(e, &g.velocity))
 }
 
 /// Whether `name` occurs anywhere in `t` as an identifier.
@@ -488,7 +542,7 @@ fn pat_ident(p: &syn::Pat) -> Option<&Ident> {
 
 /// Whether `body` binds none of the names the rewrite relies on: the loop variable, the
 /// coordinates and velocities, the const parameters and `t`.
-fn binders_ok(env: &Env, body: &Expr, var: Option<&Ident>) -> bool {
+fn binders_ok(env: &Env, body: &Expr, vars: &[Ident]) -> bool {
     struct Binders(BTreeSet<String>);
     impl<'ast> Visit<'ast> for Binders {
         fn visit_pat_ident(&mut self, p: &'ast syn::PatIdent) {
@@ -505,7 +559,7 @@ fn binders_ok(env: &Env, body: &Expr, var: Option<&Ident>) -> bool {
         .chain(env.const_params.iter().map(|p| p.to_string()))
         .chain([TIME.to_string()])
         .collect();
-    reserved.extend(var.map(|v| v.to_string()));
+    reserved.extend(vars.iter().map(|v| v.to_string()));
     !reserved.iter().any(|r| b.0.contains(r))
 }
 
@@ -519,7 +573,7 @@ struct Key {
 /// Replaces `q[e]`, `q_dot[e]` and scalar coordinates by slot stand-ins.
 struct Rewrite<'a> {
     env: &'a Env,
-    var: Option<&'a Ident>,
+    vars: Vec<Ident>,
     keys: Vec<Key>,
     ok: bool,
 }
@@ -569,7 +623,7 @@ impl Rewrite<'_> {
                 matches!(&l.lit, syn::Lit::Int(i) if matches!(i.suffix(), "" | "usize"))
             }
             Expr::Path(p) => p.path.get_ident().is_some_and(|i| {
-                p.qself.is_none() && (self.var == Some(i) || self.env.const_params.contains(i))
+                p.qself.is_none() && (self.vars.contains(i) || self.env.const_params.contains(i))
             }),
             Expr::Paren(p) => self.simple_index(&p.expr),
             Expr::Group(g) => self.simple_index(&g.expr),
@@ -657,6 +711,7 @@ mod tests {
 
     #[test]
     fn index_sums_split() {
+        let kinetic_for_nested = quote!((0..N).map(|i| q_dot[i] * q_dot[i]).sum());
         // The spring chain of `src/models.rs`, with guarded neighbours.
         assert!(splits(quote!(
             coordinates(q: [f64; N]),
@@ -674,6 +729,12 @@ mod tests {
             coordinates(q: [f64; N]),
             lagrangian = k * ((0..N).map(|i| q_dot[i] * q_dot[i]).sum() / 2.0
                 - -(1..N).map(|i| (q[i] * q[i - 1]).cos()).sum()) - q[0],
+        )));
+        // Nested index sums: all pairs, the inner range starting at the outer variable.
+        assert!(splits(quote!(
+            coordinates(q: [f64; N]),
+            lagrangian = #kinetic_for_nested
+                - (0..N).map(|i| (i + 1..N).map(|j| k * (q[i] - q[j]).powi(2)).sum()).sum(),
         )));
         // `for` accumulations, with `let`s in the loop body and `-=`.
         assert!(splits(quote!(
@@ -702,15 +763,17 @@ mod tests {
             quote!(#kinetic * (0..N).map(|i| q[i]).sum()),
             // An index through a local.
             quote!(#kinetic - (0..N).map(|i| { let j = i + 1; q[j % N] }).sum()),
-            // A nested sum over another index.
-            quote!(#kinetic - (0..N).map(|i| (0..N).map(|j| q[i] * q[j]).sum()).sum()),
+            // A nested sum whose range depends on a coordinate.
+            quote!(#kinetic - (0..N).map(|i| (0..N).map(|j| q[i] * q[j]).sum() * q[0]).sum()),
             // The whole array.
             quote!(#kinetic - (0..N).map(|i| q[i] * q.len() as f64).sum()),
             // A coordinate's name rebound in the term.
             quote!(#kinetic - (0..N).map(|i| { let q_dot = 2.0; q[i] * q_dot }).sum()),
             // The loop variable rebound.
             quote!(#kinetic - (0..N).map(|i| { let i = 0; q[i] }).sum()),
-            // A range that depends on a coordinate is not a plain index sum.
+            // A range over the array's length.
+            quote!(#kinetic - (0..q.len()).map(|i| q[i] * k).sum()),
+            // A product over an index is not a sum.
             quote!(#kinetic - (0..N).map(|i| q[i] * k).product()),
         ] {
             assert!(
