@@ -203,7 +203,14 @@ impl Analysis<'_> {
         if closure.inputs.len() != 1 || closure.capture.is_some() {
             return None;
         }
-        let var = pat_ident(closure.inputs.first()?)?;
+        let input = closure.inputs.first()?;
+        // The per-term kernels take the variable as a `usize`: no other declared type.
+        if let syn::Pat::Type(t) = input {
+            if !matches!(&*t.ty, syn::Type::Path(p) if p.path.is_ident("usize")) {
+                return None;
+            }
+        }
+        let var = pat_ident(input)?;
         let body = &*closure.body;
         Some((self.iterator(var, &map.receiver, body, loops)?, body))
     }
