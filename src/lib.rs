@@ -6,6 +6,7 @@
 
 pub mod baselines;
 pub mod handwritten;
+pub mod large;
 pub mod models;
 pub mod reference;
 pub mod report;

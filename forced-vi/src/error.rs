@@ -218,6 +218,13 @@ pub enum Error {
         /// What went wrong.
         failure: NewtonFailure,
     },
+    /// The sparse path was asked for (or chosen) where it cannot run: the model has no
+    /// sparse node kernels, or the run is adaptive (the sparse path steps with a fixed `h`).
+    #[error("the sparse path cannot run: {reason}")]
+    SparsePathUnavailable {
+        /// Why.
+        reason: &'static str,
+    },
     /// A scheme could not be built.
     #[error(transparent)]
     Scheme(#[from] SchemeError),
@@ -245,6 +252,7 @@ impl Error {
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
             Error::NonFiniteModel { .. } => "non_finite_model".into(),
             Error::NewtonFailed { failure, .. } => format!("newton_{}", failure.kind()),
+            Error::SparsePathUnavailable { .. } => "sparse_path_unavailable".into(),
             Error::Scheme(_) => "invalid_scheme".into(),
         }
     }

@@ -7,6 +7,7 @@ use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
+use crate::sparse::{record_node_pattern, NodePattern, SparseNode, SparseStepper};
 use crate::stepper::Stepper;
 use crate::trajectory::{
     hermite, DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord,
@@ -46,6 +47,37 @@ impl Default for StepOptions {
 /// lazily: only the pages the kernels touch use memory).
 pub const MAX_KERNEL_STACK: usize = 4 << 30;
 
+/// Which linear algebra a run uses: the dense step with `N × N` node blocks, or the sparse
+/// step of DESIGN §9 on the model's [`SparseNode`] kernels.
+///
+/// [`LinearPath::Auto`] (the default) takes the sparse path when the model has sparse
+/// kernels ([`ForcedLagrangian::sparse_node`]), at least [`LinearPath::SPARSE_MIN_DOF`]
+/// coordinates, and a node pattern (the union of the blocks `A, B, C, E`, recorded at the
+/// initial state) with at most [`LinearPath::SPARSE_MAX_DENSITY`] `· N²` entries; otherwise
+/// the dense one. The sparse path steps with a fixed `h` only: an adaptive run that would
+/// take it fails with [`Error::SparsePathUnavailable`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LinearPath {
+    /// By size and density (see above).
+    #[default]
+    Auto,
+    /// Always the dense step.
+    Dense,
+    /// Always the sparse step; a model without sparse kernels is an error.
+    Sparse,
+}
+
+impl LinearPath {
+    /// The fewest coordinates for which [`LinearPath::Auto`] takes the sparse path.
+    /// Measured on the FPU chain (3 entries per row): the sparse step is as fast as the
+    /// dense one at about n = 8, and faster above.
+    pub const SPARSE_MIN_DOF: usize = 12;
+    /// The densest node pattern, as a fraction of `N²`, for which [`LinearPath::Auto`] takes
+    /// the sparse path.
+    pub const SPARSE_MAX_DENSITY: f64 = 0.25;
+}
+
 /// A fixed-step variational integrator for one model and one scheme.
 ///
 /// ```
@@ -72,6 +104,7 @@ pub struct Integrator<'m, M, const N: usize> {
     pub(crate) options: StepOptions,
     /// With tolerances the run is adaptive and `h` is only its first step.
     pub(crate) tolerance: Option<Tolerance<N>>,
+    pub(crate) linear_path: LinearPath,
 }
 
 // By hand: the model is borrowed, so neither needs `M: Clone` or `M: Debug`.
@@ -83,6 +116,7 @@ impl<M, const N: usize> Clone for Integrator<'_, M, N> {
             h: self.h,
             options: self.options,
             tolerance: self.tolerance,
+            linear_path: self.linear_path,
         }
     }
 }
@@ -95,6 +129,7 @@ impl<M, const N: usize> std::fmt::Debug for Integrator<'_, M, N> {
             .field("h", &self.h)
             .field("options", &self.options)
             .field("tolerance", &self.tolerance)
+            .field("linear_path", &self.linear_path)
             .finish()
     }
 }
@@ -103,20 +138,19 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// The most subdivision levels a step may use: 2²⁰ substeps.
     pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
 
-    /// An integrator with step `h`. Defaults: [`StepOptions::default`].
+    /// An integrator with step `h`. Defaults: [`StepOptions::default`], fixed steps,
+    /// [`LinearPath::Auto`].
     ///
     /// Fails if `h` is not positive and finite (with `1/h` finite too), a model parameter
     /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), or its
-    /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack.
+    /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack (for a model with sparse
+    /// kernels, only when a run takes the dense path).
     pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
         if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
             return Err(Error::InvalidStepSize { h });
         }
-        if M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
-            return Err(Error::ModelTooLarge {
-                stack_bytes: M::KERNEL_STACK_BYTES,
-                max: MAX_KERNEL_STACK,
-            });
+        if model.sparse_node().is_none() {
+            check_kernel_stack::<M, N>()?;
         }
         model
             .check_parameters()
@@ -130,6 +164,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             h,
             options: StepOptions::default(),
             tolerance: None,
+            linear_path: LinearPath::Auto,
         })
     }
 
@@ -183,6 +218,13 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         self
     }
 
+    /// Chooses the linear algebra of the runs (default [`LinearPath::Auto`]).
+    #[must_use]
+    pub fn linear_path(mut self, path: LinearPath) -> Self {
+        self.linear_path = path;
+        self
+    }
+
     /// Caps the steps of a run ([`StepOptions::DEFAULT_MAX_STEPS`] by default).
     #[must_use]
     pub fn max_steps(mut self, steps: usize) -> Self {
@@ -200,10 +242,109 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         self.h
     }
 
-    /// A streaming stepper from `init` to `t_final`: an iterator of records, initial state
-    /// first, that holds only the current state.
+    /// The dense path's streaming stepper from `init` to `t_final`: an iterator of records,
+    /// initial state first, that holds only the current state. The run methods choose the
+    /// path by [`LinearPath`]; see [`Self::sparse_stepper`] for the sparse one.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
+        check_kernel_stack::<M, N>()?;
         Stepper::new(self, init, t_final)
+    }
+
+    /// The sparse path's streaming stepper (DESIGN §9), for a model with sparse kernels.
+    /// Fails with [`Error::SparsePathUnavailable`] without them or with tolerances set.
+    pub fn sparse_stepper(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<SparseStepper<'_, M, N>, Error> {
+        let node = self
+            .model
+            .sparse_node()
+            .ok_or(Error::SparsePathUnavailable {
+                reason: "the model has no sparse node kernels",
+            })?;
+        let pattern = self.record_pattern(node, &init)?;
+        self.open_sparse(node, pattern, init, t_final)
+    }
+
+    /// The path a run from `init` takes ([`LinearPath::Dense`] or [`LinearPath::Sparse`]),
+    /// or why it cannot run.
+    pub fn path_for(&self, init: &InitialState<N>) -> Result<LinearPath, Error> {
+        Ok(match self.choose(init)? {
+            Some(_) => LinearPath::Sparse,
+            None => LinearPath::Dense,
+        })
+    }
+
+    /// The sparse kernels and their pattern if the run takes the sparse path.
+    fn choose(
+        &self,
+        init: &InitialState<N>,
+    ) -> Result<Option<(&'m dyn SparseNode, NodePattern)>, Error> {
+        let node = self.model.sparse_node();
+        let node = match (self.linear_path, node) {
+            (LinearPath::Dense, _) => return Ok(None),
+            (LinearPath::Sparse, None) => {
+                return Err(Error::SparsePathUnavailable {
+                    reason: "the model has no sparse node kernels",
+                })
+            }
+            (LinearPath::Auto, Some(_)) if N < LinearPath::SPARSE_MIN_DOF => return Ok(None),
+            (LinearPath::Auto, None) => return Ok(None),
+            (_, Some(node)) => node,
+        };
+        let pattern = self.record_pattern(node, init)?;
+        let dense_enough = pattern.nnz() as f64 > LinearPath::SPARSE_MAX_DENSITY * (N * N) as f64;
+        if self.linear_path == LinearPath::Auto && dense_enough {
+            return Ok(None);
+        }
+        Ok(Some((node, pattern)))
+    }
+
+    /// Records the node pattern at the initial state (at `v = 0` for initial momenta).
+    fn record_pattern(
+        &self,
+        node: &dyn SparseNode,
+        init: &InitialState<N>,
+    ) -> Result<NodePattern, Error> {
+        if self.tolerance.is_some() {
+            return Err(Error::SparsePathUnavailable {
+                reason: "adaptive step control is not implemented on the sparse path",
+            });
+        }
+        match init {
+            InitialState::Velocity { q, v } => record_node_pattern(node, 0.0, q, v),
+            InitialState::Momentum { q, .. } => record_node_pattern(node, 0.0, q, &vec![0.0; N]),
+        }
+    }
+
+    fn open_sparse(
+        &self,
+        node: &'m dyn SparseNode,
+        pattern: NodePattern,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<SparseStepper<'_, M, N>, Error> {
+        SparseStepper::new(self, node, pattern, init, t_final)
+    }
+
+    /// Opens the run's stepper on the chosen path and hands it to `visit`.
+    fn open<R>(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+        visit: impl FnOnce(&mut dyn Steps<N>) -> R,
+    ) -> Result<R, Error> {
+        match self.choose(&init)? {
+            Some((node, pattern)) => {
+                let mut s = self.open_sparse(node, pattern, init, t_final)?;
+                Ok(visit(&mut s))
+            }
+            None => {
+                let mut s = self.stepper(init, t_final)?;
+                Ok(visit(&mut s))
+            }
+        }
     }
 
     /// Streams every record to `f` and returns the totals. Memory use does not grow with
@@ -214,22 +355,26 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         t_final: f64,
         mut f: impl FnMut(&StepRecord<N>),
     ) -> Result<RunStats, StreamFailure> {
-        let mut stepper = self.stepper(init, t_final).map_err(|error| StreamFailure {
-            error,
-            stats: RunStats::default(),
-        })?;
-        for rec in stepper.by_ref() {
-            match rec {
-                Ok(r) => f(&r),
-                Err(error) => {
-                    return Err(StreamFailure {
-                        error,
-                        stats: stepper.stats(),
-                    })
+        let streamed = self.open(init, t_final, |stepper| {
+            while let Some(rec) = Iterator::next(stepper) {
+                match rec {
+                    Ok(r) => f(&r),
+                    Err(error) => {
+                        return Err(StreamFailure {
+                            error,
+                            stats: stepper.stats(),
+                        })
+                    }
                 }
             }
-        }
-        Ok(stepper.stats())
+            Ok(stepper.stats())
+        });
+        streamed.unwrap_or_else(|error| {
+            Err(StreamFailure {
+                error,
+                stats: RunStats::default(),
+            })
+        })
     }
 
     /// Runs to `t_final` and returns the final state alone: the cheapest run. No record is
@@ -242,25 +387,25 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         t_final: f64,
     ) -> Result<FinalState<N>, StreamFailure> {
         let fail = |error, stats| StreamFailure { error, stats };
-        let mut stepper = self
-            .stepper(init, t_final)
-            .map_err(|e| fail(e, RunStats::default()))?;
-        stepper.set_lean(true);
-        for rec in stepper.by_ref() {
-            if let Err(e) = rec {
-                return Err(fail(e, stepper.stats()));
+        let finished = self.open(init, t_final, |stepper| {
+            stepper.set_lean(true);
+            while let Some(rec) = Iterator::next(stepper) {
+                if let Err(e) = rec {
+                    return Err(fail(e, stepper.stats()));
+                }
             }
-        }
-        let stats = stepper.stats();
-        let end = stepper.finish().map_err(|e| fail(e, stats))?;
-        Ok(FinalState {
-            t: end.t,
-            q: end.q,
-            p: end.p,
-            v: end.v,
-            energy: end.energy,
-            stats,
-        })
+            let stats = stepper.stats();
+            let end = stepper.finish().map_err(|e| fail(e, stats))?;
+            Ok(FinalState {
+                t: end.t,
+                q: end.q,
+                p: end.p,
+                v: end.v,
+                energy: end.energy,
+                stats,
+            })
+        });
+        finished.unwrap_or_else(|e| Err(fail(e, RunStats::default())))
     }
 
     /// Runs to the last of `times` and returns the dense output at each of them (see
@@ -281,80 +426,130 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             return Err(fail(Error::UnorderedTimes, Vec::new()));
         }
         let t_final = times.last().copied().unwrap_or(0.0);
-        let mut stepper = self
-            .stepper(init, t_final)
-            .map_err(|e| fail(e, Vec::new()))?;
-        let mut out = Vec::with_capacity(times.len());
-        let mut prev: Option<StepRecord<N>> = None;
-        for rec in stepper.by_ref() {
-            let rec = match rec {
-                Ok(r) => r,
-                Err(e) => return Err(fail(e, out)),
-            };
-            while let Some(&t) = times.get(out.len()).filter(|&&t| t <= rec.t) {
-                out.push(match &prev {
-                    Some(a) => hermite(a, &rec, t),
-                    None => hermite(&rec, &rec, t),
-                });
+        let sampled = self.open(init, t_final, |stepper| {
+            let mut out = Vec::with_capacity(times.len());
+            let mut prev: Option<StepRecord<N>> = None;
+            while let Some(rec) = Iterator::next(stepper) {
+                let rec = match rec {
+                    Ok(r) => r,
+                    Err(e) => return Err(fail(e, out)),
+                };
+                while let Some(&t) = times.get(out.len()).filter(|&&t| t <= rec.t) {
+                    out.push(match &prev {
+                        Some(a) => hermite(a, &rec, t),
+                        None => hermite(&rec, &rec, t),
+                    });
+                }
+                prev = Some(rec);
             }
-            prev = Some(rec);
-        }
-        Ok(out)
+            Ok(out)
+        });
+        sampled.unwrap_or_else(|e| Err(fail(e, Vec::new())))
     }
 
     /// Runs to `t_final` and collects every record. On failure the records computed so far
     /// come back with the error.
     pub fn run(&self, init: InitialState<N>, t_final: f64) -> Result<Trajectory<N>, RunFailure<N>> {
-        let mut traj = Trajectory::default();
-        let mut stepper = match self.stepper(init, t_final) {
-            Ok(s) => s,
-            Err(error) => {
-                return Err(RunFailure {
-                    error,
-                    trajectory: traj,
-                })
-            }
-        };
-        // A fixed-step run reserves all its records up front, so that a run that cannot
-        // hold them fails before its first step rather than aborting in the middle; an
-        // adaptive one grows its storage fallibly.
-        let records = stepper.total_steps().saturating_add(1);
-        let reserve = if self.tolerance.is_some() {
-            records.min(1024)
-        } else {
-            records
-        };
-        if traj.records.try_reserve_exact(reserve).is_err() {
-            return Err(RunFailure {
-                error: Error::TooManyRecords { records },
-                trajectory: traj,
-            });
-        }
-        for rec in stepper.by_ref() {
-            match rec {
-                Ok(r) => {
-                    if traj.records.len() == traj.records.capacity()
-                        && traj.records.try_reserve(traj.records.len()).is_err()
-                    {
-                        traj.stats = stepper.stats();
-                        let records = traj.records.len() * 2;
-                        return Err(RunFailure {
-                            error: Error::TooManyRecords { records },
-                            trajectory: traj,
-                        });
-                    }
-                    traj.records.push(r)
-                }
-                Err(error) => {
+        let adaptive = self.tolerance.is_some();
+        let collected = self.open(init, t_final, |stepper| collect(stepper, adaptive));
+        collected.unwrap_or_else(|error| {
+            Err(RunFailure {
+                error,
+                trajectory: Trajectory::default(),
+            })
+        })
+    }
+}
+
+/// Collects a run's records. A fixed-step run reserves all its records up front, so that a
+/// run that cannot hold them fails before its first step rather than aborting in the
+/// middle; an adaptive one grows its storage fallibly.
+fn collect<const N: usize>(
+    stepper: &mut dyn Steps<N>,
+    adaptive: bool,
+) -> Result<Trajectory<N>, RunFailure<N>> {
+    let mut traj = Trajectory::default();
+    let records = stepper.total_steps().saturating_add(1);
+    let reserve = if adaptive { records.min(1024) } else { records };
+    if traj.records.try_reserve_exact(reserve).is_err() {
+        return Err(RunFailure {
+            error: Error::TooManyRecords { records },
+            trajectory: traj,
+        });
+    }
+    while let Some(rec) = Iterator::next(stepper) {
+        match rec {
+            Ok(r) => {
+                if traj.records.len() == traj.records.capacity()
+                    && traj.records.try_reserve(traj.records.len()).is_err()
+                {
                     traj.stats = stepper.stats();
+                    let records = traj.records.len() * 2;
                     return Err(RunFailure {
-                        error,
+                        error: Error::TooManyRecords { records },
                         trajectory: traj,
                     });
                 }
+                traj.records.push(r)
+            }
+            Err(error) => {
+                traj.stats = stepper.stats();
+                return Err(RunFailure {
+                    error,
+                    trajectory: traj,
+                });
             }
         }
-        traj.stats = stepper.stats();
-        Ok(traj)
+    }
+    traj.stats = stepper.stats();
+    Ok(traj)
+}
+
+/// Refuses a model whose dense kernels need more stack than [`MAX_KERNEL_STACK`].
+fn check_kernel_stack<M: ForcedLagrangian<N>, const N: usize>() -> Result<(), Error> {
+    if M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
+        return Err(Error::ModelTooLarge {
+            stack_bytes: M::KERNEL_STACK_BYTES,
+            max: MAX_KERNEL_STACK,
+        });
+    }
+    Ok(())
+}
+
+/// A run's stepper on either path, as the run methods drive it.
+trait Steps<const N: usize>: Iterator<Item = Result<StepRecord<N>, Error>> {
+    fn stats(&self) -> RunStats;
+    fn total_steps(&self) -> usize;
+    fn set_lean(&mut self, lean: bool);
+    fn finish(&mut self) -> Result<StepRecord<N>, Error>;
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for Stepper<'_, M, N> {
+    fn stats(&self) -> RunStats {
+        Stepper::stats(self)
+    }
+    fn total_steps(&self) -> usize {
+        Stepper::total_steps(self)
+    }
+    fn set_lean(&mut self, lean: bool) {
+        Stepper::set_lean(self, lean)
+    }
+    fn finish(&mut self) -> Result<StepRecord<N>, Error> {
+        Stepper::finish(self)
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for SparseStepper<'_, M, N> {
+    fn stats(&self) -> RunStats {
+        SparseStepper::stats(self)
+    }
+    fn total_steps(&self) -> usize {
+        SparseStepper::total_steps(self)
+    }
+    fn set_lean(&mut self, lean: bool) {
+        SparseStepper::set_lean(self, lean)
+    }
+    fn finish(&mut self) -> Result<StepRecord<N>, Error> {
+        SparseStepper::finish(self)
     }
 }

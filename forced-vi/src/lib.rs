@@ -52,7 +52,8 @@
 //! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
 //! | the integrator builder and its run methods | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
-//! | large models: sparse node kernels, the sparse step (DESIGN §9) | [`sparse`] |
+//! | large models: sparse node kernels, the sparse step and its Newton, faer's sparse LU (DESIGN §9) | [`sparse`] |
+//! | the choice of dense or sparse step | [`LinearPath`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
 
 pub mod control;
@@ -73,11 +74,12 @@ pub mod trajectory;
 pub use control::Tolerance;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
-pub use integrator::{Integrator, StepOptions, MAX_KERNEL_STACK};
+pub use integrator::{Integrator, LinearPath, StepOptions, MAX_KERNEL_STACK};
 pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
+pub use sparse::SparseStepper;
 pub use stepper::Stepper;
 pub use trajectory::{
     DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure,

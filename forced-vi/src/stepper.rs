@@ -722,7 +722,7 @@ enum StepFailure {
 ///
 /// A ratio within 1e-10 of an integer is that integer, so that `t_final = n·h` does not
 /// end with a sliver of a step; any positive `t_final` takes at least one step.
-fn step_count(t_final: f64, h: f64, max: usize) -> Result<usize, Error> {
+pub(crate) fn step_count(t_final: f64, h: f64, max: usize) -> Result<usize, Error> {
     let ratio = t_final / h;
     let steps = if (ratio - ratio.round()).abs() <= 1e-10 * ratio.max(1.0) {
         ratio.round()

@@ -1,0 +1,158 @@
+//! The step equations of DESIGN §3 on sparse storage: the residual `G_j` and the Jacobian
+//! `∂G_j/∂x_m` in the increments `Z_j = x_j − q_k`, from sparse node kernels. The scheme's
+//! coefficients, and the chain-rule terms of the Jacobian, are the dense path's
+//! ([`Scheme`], [`Scheme::jacobian_terms`]); only the storage differs.
+
+use crate::error::NewtonFailure;
+use crate::scheme::Scheme;
+use crate::sparse::newton::SparseSystem;
+use crate::sparse::node::{NodeBlocks, NodePattern, NodeSink, SparseNode};
+use crate::sparse::pattern::StepPattern;
+
+/// The nonlinear system of one sparse step. Vectors of unknowns and residuals are
+/// coordinate-major (see [`crate::sparse::pattern`]); node vectors are `r` blocks of `n`.
+pub(crate) struct SparseStep<'a> {
+    pub(crate) node: &'a dyn SparseNode,
+    pub(crate) scheme: &'a Scheme,
+    pub(crate) n: usize,
+    pub(crate) h: f64,
+    /// The step's start time; node `i` is at `t0 + c_i h` (DESIGN §7).
+    pub(crate) t0: f64,
+    pub(crate) q0: Vec<f64>,
+    pub(crate) p0: Vec<f64>,
+    /// Positions, velocities, `L_q + F` and `L_v` at the quadrature nodes.
+    pub(crate) xs: Vec<f64>,
+    pub(crate) vs: Vec<f64>,
+    pub(crate) fq: Vec<f64>,
+    pub(crate) lv: Vec<f64>,
+    pub(crate) pattern: NodePattern,
+    pub(crate) blocks: Vec<NodeBlocks>,
+    pub(crate) step_pattern: StepPattern,
+    /// A kernel wrote outside the recorded pattern (a defect of the model).
+    pub(crate) outside: bool,
+}
+
+impl<'a> SparseStep<'a> {
+    /// Buffers for `node` and `scheme` on a recorded pattern.
+    pub(crate) fn new(node: &'a dyn SparseNode, scheme: &'a Scheme, pattern: NodePattern) -> Self {
+        let (n, r) = (pattern.n(), scheme.quadrature_nodes());
+        let step_pattern = StepPattern::new(&pattern, scheme.stages());
+        SparseStep {
+            node,
+            scheme,
+            n,
+            h: 1.0,
+            t0: 0.0,
+            q0: vec![0.0; n],
+            p0: vec![0.0; n],
+            xs: vec![0.0; r * n],
+            vs: vec![0.0; r * n],
+            fq: vec![0.0; r * n],
+            lv: vec![0.0; r * n],
+            blocks: (0..r).map(|_| NodeBlocks::zeros(pattern.nnz())).collect(),
+            pattern,
+            step_pattern,
+            outside: false,
+        }
+    }
+
+    /// The node positions and velocities of the step polynomial with increments `z`.
+    fn nodes(&mut self, z: &[f64]) {
+        let (sch, n) = (self.scheme, self.n);
+        let s1 = sch.stages() - 1;
+        let inv_h = 1.0 / self.h;
+        for i in 0..sch.quadrature_nodes() {
+            let (x, v) = (
+                &mut self.xs[i * n..(i + 1) * n],
+                &mut self.vs[i * n..(i + 1) * n],
+            );
+            for a in 0..n {
+                let za = &z[a * s1..(a + 1) * s1];
+                let (mut xa, mut va) = (self.q0[a], 0.0);
+                for (m, &zm) in za.iter().enumerate() {
+                    xa += sch.phi(i, m + 1) * zm;
+                    va += sch.psi(i, m + 1) * zm;
+                }
+                x[a] = xa;
+                v[a] = va * inv_h;
+            }
+        }
+    }
+
+    /// The time of quadrature node `i`.
+    pub(crate) fn node_time(&self, i: usize) -> f64 {
+        self.t0 + self.scheme.c()[i] * self.h
+    }
+
+    /// Evaluates the node gradients (and, with `blocks`, the node blocks) at the nodes.
+    fn eval_nodes(&mut self, blocks: bool) -> Result<(), NewtonFailure> {
+        let n = self.n;
+        for i in 0..self.scheme.quadrature_nodes() {
+            let t = self.node_time(i);
+            let range = i * n..(i + 1) * n;
+            let (x, v) = (&self.xs[range.clone()], &self.vs[range.clone()]);
+            let (fq, lv) = (&mut self.fq[range.clone()], &mut self.lv[range]);
+            let mut sink = if blocks {
+                NodeSink::values(fq, lv, &self.pattern, &mut self.blocks[i])
+            } else {
+                NodeSink::gradient(fq, lv)
+            };
+            self.node.eval(t, x, v, &mut sink);
+            if sink.outside() {
+                self.outside = true;
+                return Err(NewtonFailure::NonFinite);
+            }
+            let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+            if !(finite(&self.fq[i * n..(i + 1) * n]) && finite(&self.lv[i * n..(i + 1) * n])) {
+                return Err(NewtonFailure::NonFinite);
+            }
+        }
+        Ok(())
+    }
+
+    /// `Σ_j G_j = h Σ_i b_i (L_q + F)_i` for coordinate `a`: the momentum increment.
+    pub(crate) fn momentum_increment(&self, a: usize) -> f64 {
+        let (sch, n) = (self.scheme, self.n);
+        (0..sch.quadrature_nodes())
+            .map(|i| self.h * sch.b()[i] * self.fq[i * n + a])
+            .sum()
+    }
+}
+
+impl SparseSystem for SparseStep<'_> {
+    fn residual(&mut self, z: &[f64], r: &mut [f64]) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        self.eval_nodes(false)?;
+        let (sch, n, h) = (self.scheme, self.n, self.h);
+        let s1 = sch.stages() - 1;
+        for a in 0..n {
+            for j in 0..s1 {
+                let mut g = if j == 0 { self.p0[a] } else { 0.0 };
+                for i in 0..sch.quadrature_nodes() {
+                    let bi = sch.b()[i];
+                    g += bi * h * sch.phi(i, j) * self.fq[i * n + a]
+                        + bi * sch.psi(i, j) * self.lv[i * n + a];
+                }
+                r[a * s1 + j] = g;
+            }
+        }
+        Ok(())
+    }
+
+    fn jacobian(&mut self, z: &[f64], values: &mut [f64]) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        self.eval_nodes(true)?;
+        let (h, s1) = (self.h, self.scheme.stages() - 1);
+        let base = &self.step_pattern.base;
+        values.fill(0.0);
+        for t in self.scheme.jacobian_terms() {
+            let blk = &self.blocks[t.i];
+            let (ca, cb, cc, ce) = (t.a * h, t.b, t.c, t.e / h);
+            for k in 0..self.pattern.nnz() {
+                let x = ca * blk.a[k] + cb * blk.b[k] + cc * blk.c[k] + ce * blk.e[k];
+                values[base[k * s1 + t.m - 1] + t.j] += x;
+            }
+        }
+        Ok(())
+    }
+}
