@@ -394,3 +394,69 @@ fn a_sparse_step_allocates_nothing() {
     integ.run(Lattice2d::<16, 256>::initial(), 0.1).unwrap();
     assert!(allocations() > before);
 }
+
+/// Least-squares slope of `log err` against `log h`.
+fn slope(hs: &[f64], errs: &[f64]) -> f64 {
+    let xs: Vec<f64> = hs.iter().map(|h| h.ln()).collect();
+    let ys: Vec<f64> = errs.iter().map(|e| e.ln()).collect();
+    let n = xs.len() as f64;
+    let (mx, my) = (xs.iter().sum::<f64>() / n, ys.iter().sum::<f64>() / n);
+    let sxy: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = xs.iter().map(|x| (x - mx) * (x - mx)).sum();
+    sxy / sxx
+}
+
+/// SELF-CONVERGENCE, a placeholder: the errors are against the sparse path's own lobatto5
+/// run at h = 1/80, not against an independent solution. The lead engineer will commit a
+/// scipy DOP853/Radau reference for the n = 64 chain; this test then compares with it.
+#[test]
+fn orders_on_the_n64_chain_self_convergence() {
+    let _g = serial();
+    let model = FpuChain::<64>::default();
+    // Modes 8 and 20, with springs stretched into the quartic range (|d| up to about 1).
+    let x = |i: usize| std::f64::consts::PI * (i + 1) as f64 / 65.0;
+    let q = std::array::from_fn(|i| 0.3 * (8.0 * x(i)).sin());
+    let v = std::array::from_fn(|i| 0.8 * (20.0 * x(i)).cos());
+    let (t, init) = (8.0, InitialState::from_velocity(q, v));
+    let end = |s: usize, steps: usize| {
+        let h = t / steps as f64;
+        let traj = run(
+            &model,
+            &Scheme::lobatto(s).unwrap(),
+            h,
+            LinearPath::Sparse,
+            t,
+            init,
+        );
+        let last = *traj.last().unwrap();
+        (last.q, last.p)
+    };
+    let (q_ref, p_ref) = end(5, 640);
+    let cases: [(usize, &[usize]); 4] = [
+        (2, &[40, 80, 160]),
+        (3, &[32, 64, 128]),
+        (4, &[20, 40, 80]),
+        (5, &[24, 32, 48, 64]),
+    ];
+    for (s, steps) in cases {
+        let hs: Vec<f64> = steps.iter().map(|&k| t / k as f64).collect();
+        let errs: Vec<f64> = steps
+            .iter()
+            .map(|&k| {
+                let (q, p) = end(s, k);
+                (q - q_ref).amax().max((p - p_ref).amax())
+            })
+            .collect();
+        let order = 2.0 * s as f64 - 2.0;
+        let fitted = slope(&hs, &errs);
+        eprintln!("lobatto{s}: errors {errs:?}, slope {fitted:.2}");
+        assert!(
+            (fitted - order).abs() < 0.3,
+            "lobatto{s}: slope {fitted} (errors {errs:?})"
+        );
+        assert!(
+            errs.iter().all(|&e| e > 1e-13),
+            "lobatto{s}: errors at round-off {errs:?}"
+        );
+    }
+}

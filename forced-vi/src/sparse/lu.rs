@@ -148,7 +148,8 @@ impl SparseLu {
             }
         });
         self.probe = probe;
-        if !(size * self.max_abs() < MAX_CONDITION) {
+        let condition = size * self.max_abs();
+        if condition.is_nan() || condition >= MAX_CONDITION {
             self.factored = false;
             return Err(NewtonFailure::SingularJacobian);
         }
