@@ -1,6 +1,7 @@
 //! The FPU-β chain at n = 1024 on the sparse path (DESIGN §9): prints the path taken and the
 //! median µs per step of lobatto2 and lobatto3. `--scaling` also measures n = 32 … 4096,
-//! the 64 × 64 membrane, and the dense path at small n (the crossover).
+//! the 64 × 64 membrane, and the dense path at small n (the crossover); `--n4096` runs the
+//! n = 4096 chain alone (for its peak memory).
 //!
 //! `cargo run --release --example large_chain [-- --scaling]`
 
@@ -49,6 +50,11 @@ fn chain<const N: usize>(s: usize, path: LinearPath, steps: usize) -> f64 {
 
 fn main() {
     let scaling = std::env::args().any(|a| a == "--scaling");
+    if std::env::args().any(|a| a == "--n4096") {
+        // Alone, for the peak resident set of the largest chain.
+        chain::<4096>(3, LinearPath::Auto, 20);
+        return;
+    }
     if !scaling {
         chain::<1024>(2, LinearPath::Auto, 100);
         chain::<1024>(3, LinearPath::Auto, 100);
