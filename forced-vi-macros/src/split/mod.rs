@@ -144,6 +144,13 @@ impl Analysis<'_> {
                     None => self.leaf(e, loops, weight, out),
                 }
             }
+            // `{ e }` is `e` (rustfmt writes a nested sum's closure body this way).
+            Expr::Block(b) if b.label.is_none() && tail_only(&b.block).is_some() => {
+                match tail_only(&b.block) {
+                    Some(inner) => self.decompose(inner, loops, weight, out),
+                    None => self.leaf(e, loops, weight, out),
+                }
+            }
             Expr::Block(b) if b.label.is_none() => match accumulation(&b.block) {
                 Some(parts) => {
                     for (var_iter, body, negative) in parts {
@@ -421,6 +428,14 @@ fn quietly<T>(env: &Env, loops: &[Loop], f: impl FnOnce(&mut Lowerer<'_>) -> T) 
     }
     let out = f(&mut lw);
     cx.check().ok().map(|()| out)
+}
+
+/// The expression of a block that holds nothing else (`{ e }`).
+fn tail_only(block: &syn::Block) -> Option<&Expr> {
+    match block.stmts.as_slice() {
+        [syn::Stmt::Expr(e, None)] => Some(e),
+        _ => None,
+    }
 }
 
 #[cfg(test)]

@@ -157,3 +157,31 @@ fn a_large_literal_model_must_split() {
     let out = big(quote!(#kinetic - k * (0..2048).map(|i| q[i]).sum().powi(2)));
     assert!(out.contains("compile_error") && out.contains("does not split"));
 }
+
+#[test]
+fn a_block_around_a_nested_sum_splits() {
+    // rustfmt writes the outer closure's body as a block holding only the inner sum.
+    assert!(splits(quote!(
+        coordinates(q: [f64; N]),
+        lagrangian = (0..N).map(|s| 0.5 * q_dot[s] * q_dot[s]).sum()
+            - (0..N)
+                .map(|r| {
+                    (0..=N)
+                        .map(|j| {
+                            let left = if j == 0 { 0.0 } else { q[r * N + j - 1] };
+                            let right = if j == N { 0.0 } else { q[r * N + j] };
+                            0.5 * k * (right - left) * (right - left)
+                        })
+                        .sum()
+                })
+                .sum(),
+        force(q[i] = -c * q_dot[i]),
+    )));
+    // A block with a statement before the sum is not a bare sum.
+    assert!(!splits(quote!(
+        coordinates(q: [f64; N]),
+        lagrangian = (0..N).map(|s| 0.5 * q_dot[s] * q_dot[s]).sum()
+            - (0..N).map(|r| { let x = q[r]; x.sin() }).sum().sin(),
+        force(q[i] = -c * q_dot[i]),
+    )));
+}
