@@ -254,6 +254,72 @@ impl<const N: usize> SpringChain<N> {
     };
 }
 
+impl<const N: usize> SpringChain<N> {
+    /// The parameters of the hand-written [`FpuChain`](crate::large::FpuChain) (`β = 1`), so
+    /// that generated and hand-written kernels run the same model.
+    pub const FPU: SpringChain<N> = SpringChain {
+        m: 1.0,
+        k: 1.0,
+        beta: 1.0,
+        c: 0.01,
+    };
+}
+
+/// A `W × W` membrane (`N = W²` masses, row-major) with a fixed rim: each mass is bonded to
+/// its four neighbours by springs of energy `k Δ²/2 + β Δ⁴/4` and damped by `−c v`. The same
+/// model as the hand-written [`Lattice2d`](crate::large::Lattice2d), written for the macro,
+/// which splits it into local terms (DESIGN §9).
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|s| 0.5 * m * q_dot[s] * q_dot[s]).sum()
+        - (0..W)
+            .map(|r| {
+                (0..=W)
+                    .map(|j| {
+                        let left = if j == 0 { 0.0 } else { q[r * W + j - 1] };
+                        let right = if j == W { 0.0 } else { q[r * W + j] };
+                        let d = right - left;
+                        0.5 * k * d * d + 0.25 * beta * d.powi(4)
+                    })
+                    .sum()
+            })
+            .sum()
+        - (0..W)
+            .map(|j| {
+                (0..=W)
+                    .map(|r| {
+                        let up = if r == 0 { 0.0 } else { q[(r - 1) * W + j] };
+                        let down = if r == W { 0.0 } else { q[r * W + j] };
+                        let d = down - up;
+                        0.5 * k * d * d + 0.25 * beta * d.powi(4)
+                    })
+                    .sum()
+            })
+            .sum(),
+    force(q[i] = -c * q_dot[i]),
+)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Membrane<const W: usize, const N: usize> {
+    /// Mass of each site.
+    pub m: f64,
+    /// Linear spring constant k.
+    pub k: f64,
+    /// Quartic spring constant β.
+    pub beta: f64,
+    /// Damping coefficient c.
+    pub c: f64,
+}
+
+impl<const W: usize, const N: usize> Membrane<W, N> {
+    /// `m = 1`, `k = 1`, `β = 1`, `c = 0.01`: the hand-written lattice's defaults.
+    pub const DEFAULT: Membrane<W, N> = Membrane {
+        m: 1.0,
+        k: 1.0,
+        beta: 1.0,
+        c: 0.01,
+    };
+}
+
 /// A driven Duffing oscillator, `ẍ + δẋ + αx + βx³ = γ cos ωt` (issue 13), written by hand
 /// with the time-dependent trait methods: `L = ½ẋ² − ½αx² − ¼βx⁴`,
 /// `F(t, x, ẋ) = −δẋ + γ cos ωt`.

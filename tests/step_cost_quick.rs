@@ -41,6 +41,35 @@ fn step_cost_quick_writes_both_csvs() {
         }
     }
 
+    // The sparse path of fpu_chain up to n = 1024 (issue 12), for both schemes; the dense path
+    // at small n; the membrane on both.
+    for m in ["lobatto2", "lobatto3"] {
+        for n in [32, 128, 512, 1024] {
+            let row = rows
+                .iter()
+                .find(|r| {
+                    r[0] == "fpu_chain"
+                        && r[method] == m
+                        && r[path] == "sparse"
+                        && r[2] == n.to_string()
+                })
+                .unwrap_or_else(|| panic!("no fpu_chain {m} sparse n = {n} row"));
+            let t: f64 = row[ns].parse().unwrap_or_else(|_| panic!("{row:?}"));
+            assert!(t > 0.0 && t.is_finite(), "{row:?}");
+        }
+        for (scene, p) in [
+            ("fpu_chain", "dense"),
+            ("lattice_2d", "sparse"),
+            ("lattice_2d", "dense"),
+        ] {
+            assert!(
+                rows.iter()
+                    .any(|r| r[0] == scene && r[method] == m && r[path] == p && !r[ns].is_empty()),
+                "no measured {scene} {m} {p} row"
+            );
+        }
+    }
+
     let et = fs::read_to_string(dir.path().join("ensemble_throughput.csv")).unwrap();
     let mut lines = et.lines();
     assert_eq!(

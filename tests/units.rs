@@ -569,21 +569,33 @@ mod scenes {
 
 mod report_step_cost {
     use forced_vi_scenes::report::step_cost::*;
-    use forced_vi_scenes::report::step_cost::{compile, measure};
+    use forced_vi_scenes::report::step_cost::{compile, scaling};
 
     #[test]
     fn exponent_fit() {
         let rows: Vec<Row> = [32usize, 128, 512]
             .iter()
             .map(|&n| Row {
-                generated: Some((n as f64).powi(2)),
+                scene: "fpu_chain".into(),
+                method: "lobatto3".into(),
+                n,
                 diagnostics: "full",
-                ..measure::skipped_chain(n, String::new())
+                path: "sparse",
+                generated: Some((n as f64).powi(2)),
+                handwritten: None,
+                iters: None,
+                allocs: None,
+                note: String::new(),
             })
             .collect();
-        let (e, ns) = measure::fit_exponent(&rows).unwrap();
-        assert!((e - 2.0).abs() < 1e-9);
-        assert_eq!(ns, [32, 128, 512]);
+        let fits = scaling::exponents(&rows);
+        assert_eq!(fits.len(), 1);
+        assert!((fits[0].exponent - 2.0).abs() < 1e-9);
+        assert_eq!(fits[0].sizes, [32, 128, 512]);
+        assert_eq!(
+            (fits[0].scene.as_str(), fits[0].path),
+            ("fpu_chain", "sparse")
+        );
     }
 
     #[test]

@@ -7,7 +7,7 @@
 //! step_cost.csv           scene,method,n,diagnostics,path,ns_per_step_generated,
 //!                         ns_per_step_handwritten,ratio,newton_iters_per_step,allocs_per_step
 //! ensemble_throughput.csv threads,members,member_steps_per_second
-//! step_cost_scaling.svg   time per step against n for the damped spring chain
+//! step_cost_scaling.svg   time per step against n: fpu_chain and lattice_2d, dense and sparse
 //! sections/step_cost.md   the section of README.md (targets of issue 6, met or not)
 //! ```
 //!
@@ -16,9 +16,10 @@
 //!   [`Integrator`](forced_vi::Integrator) (same predictor, Newton options and tolerances). Repeats alternate
 //!   generated and hand-written runs so that machine noise hits both alike; the medians are
 //!   reported.
-//! - `spring_chain` rows: [`SpringChain<N>`](crate::models::SpringChain) with `lobatto2` for `n = 2 … 2048`, no
-//!   hand-written counterpart. Each size runs in its own thread with a stack large enough for
-//!   the runtime's static `N × N` node blocks.
+//! - `fpu_chain` and `lattice_2d` rows (issue 12): the FPU-β chain (n = 2 … 4096) and the
+//!   W × W membrane (n = 4 … 4096), generated against hand-written sparse kernels, lobatto2
+//!   and lobatto3, on the dense and the sparse path ([`scaling`]). Each size runs in its own
+//!   thread, with a stack for the dense path's `N × N` node blocks.
 //! - allocations: counted by the binary's counting allocator between the first and the last
 //!   record of a `for_each_step` run (so the stepper's one-off buffers are excluded), divided
 //!   by the steps.
@@ -28,7 +29,7 @@
 //! # The study
 //!
 //! The paper-model rows are a study of one case per scheme, run one at a time (they are
-//! timed); the chain sizes run in order, each deciding from the last measured size whether
+//! timed); the scaling sizes run in order, each deciding from the last measured size whether
 //! the next fits the time limit. `measure`, `compile`, `figures` and `section` hold the parts.
 
 use std::time::Instant;
@@ -42,9 +43,11 @@ pub mod ensemble;
 mod figures;
 pub mod measure;
 pub mod rows;
+pub mod scaling;
+mod scaling_section;
 mod section;
 
-pub use measure::{peak_rss_kib, CHAIN_SIZES, SCHEMES};
+pub use measure::{peak_rss_kib, SCHEMES};
 pub use rows::{AllocCounter, CompileTimes, Memory, Row, StepCostRecord, Summary};
 
 /// The section name in `report/sections/`.
@@ -60,14 +63,15 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
     let memory = measure::memory(opts.quick);
     eprintln!("step-cost: generated against hand-written …");
     let (mut rows, same_iterations) = measure::paper_rows(opts.quick, counter);
-    eprintln!("step-cost: spring-chain scaling …");
-    rows.extend(measure::chain_rows(opts.quick, counter));
+    eprintln!("step-cost: fpu_chain and lattice_2d scaling, dense and sparse …");
+    let (scaling_rows, peaks) = scaling::rows(opts.quick, counter);
+    rows.extend(scaling_rows);
     eprintln!("step-cost: ensemble throughput on 1 and 2 threads …");
     let ensemble = ensemble::measure(opts.quick);
     if let Ok(t) = &ensemble {
         write_csv(&opts.out.join("ensemble_throughput.csv"), &t.records)?;
     }
-    let exponent = measure::fit_exponent(&rows);
+    let exponents = scaling::exponents(&rows);
     let compile = if opts.quick {
         Err("not measured in --quick (it builds two crates; see the full run)".to_string())
     } else {
@@ -78,11 +82,11 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
     write_csv(&opts.out.join("step_cost.csv"), &records)?;
     let svg = opts.out.join("step_cost_scaling.svg");
     style::register_font(&opts.out)?;
-    let plotted = figures::plot_scaling(&svg, &rows, exponent.as_ref().map(|e| e.0))
-        .map_err(style::plot_err(&svg))?;
+    let plotted = figures::plot_scaling(&svg, &rows).map_err(style::plot_err(&svg))?;
     let mut summary = Summary {
         rows,
-        exponent,
+        exponents,
+        peaks,
         compile,
         memory,
         same_iterations,

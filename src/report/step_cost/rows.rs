@@ -10,7 +10,7 @@ pub type AllocCounter = fn() -> u64;
 /// One row of `step_cost.csv`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
-    /// `coupled_van_der_pol` or `spring_chain`.
+    /// `coupled_van_der_pol`, `fpu_chain` or `lattice_2d`.
     pub scene: String,
     /// The scheme.
     pub method: String,
@@ -67,8 +67,10 @@ pub struct Memory {
 pub struct Summary {
     /// The CSV rows.
     pub rows: Vec<Row>,
-    /// The fitted exponent of time per step against n for n ≥ 32, and the sizes used.
-    pub exponent: Option<(f64, Vec<usize>)>,
+    /// The fitted exponents of time per step against n for n ≥ 32.
+    pub exponents: Vec<super::scaling::Exponent>,
+    /// Peak RSS of the largest sparse runs.
+    pub peaks: Vec<super::scaling::PeakRss>,
     /// The compile-time measurement, or why there is none.
     pub compile: Result<CompileTimes, String>,
     /// The streamed-memory measurement.
