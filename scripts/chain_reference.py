@@ -6,15 +6,16 @@ tolerances, which must agree). Independent of forced-vi: the equations are writt
     q_{-1} = q_n = 0,  F_i = -c v_i,  so  m a_i = -phi'(d_i) + phi'(d_{i+1}) - c v_i,
     phi'(d) = k d + beta d^3.
 
-Initial state: q_i = 0.5 sin(pi (i+1)/(n+1)) + 0.2 sin(3 pi (i+1)/(n+1)), v = 0. T = 5.
-Writes data/reference/fpu_chain_64.csv: one line per coordinate, i,q0,q_T,p_T.
+Initial state (modes 8 and 20, springs stretched into the quartic range, |d| up to about 1):
+q_i = 0.3 sin(8 x_i), v_i = 0.8 cos(20 x_i), x_i = pi (i+1)/(n+1). T = 8.
+Writes data/reference/fpu_chain_64.csv: one line per coordinate, i,q0,v0,q_T,p_T.
 
     pip install -r scripts/requirements.txt && python3 scripts/chain_reference.py
 """
 import numpy as np
 from scipy.integrate import solve_ivp
 
-N, M, K, BETA, C, T = 64, 1.0, 1.0, 1.0, 0.01, 5.0
+N, M, K, BETA, C, T = 64, 1.0, 1.0, 1.0, 0.01, 8.0
 
 
 def rhs(_t, y):
@@ -28,8 +29,9 @@ def rhs(_t, y):
 
 def main():
     x = np.pi * np.arange(1, N + 1) / (N + 1)
-    q0 = 0.5 * np.sin(x) + 0.2 * np.sin(3 * x)
-    y0 = np.concatenate((q0, np.zeros(N)))
+    q0 = 0.3 * np.sin(8 * x)
+    v0 = 0.8 * np.cos(20 * x)
+    y0 = np.concatenate((q0, v0))
     runs = {}
     for method, tol in (("DOP853", 3e-14), ("Radau", 1e-13)):
         sol = solve_ivp(rhs, (0.0, T), y0, method=method, rtol=tol, atol=tol * 1e-2)
@@ -42,9 +44,9 @@ def main():
     with open("data/reference/fpu_chain_64.csv", "w") as f:
         f.write(f"# scripts/chain_reference.py: n={N} m={M} k={K} beta={BETA} c={C} T={T}; "
                 f"DOP853 rtol 3e-14, Radau agrees to {gap:.1e}\n")
-        f.write("i,q0,q_T,p_T\n")
+        f.write("i,q0,v0,q_T,p_T\n")
         for i in range(N):
-            f.write(f"{i},{float(q0[i])!r},{float(y[i])!r},{float(M * y[N + i])!r}\n")
+            f.write(f"{i},{float(q0[i])!r},{float(v0[i])!r},{float(y[i])!r},{float(M * y[N + i])!r}\n")
 
 
 if __name__ == "__main__":
