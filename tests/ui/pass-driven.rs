@@ -41,7 +41,13 @@ pub struct Mathieu {
 }
 
 fn main() -> Result<(), forced_vi::Error> {
-    let model = DrivenDuffing { delta: 0.3, alpha: -1.0, beta: 1.0, gamma: 0.5, omega: 1.2 };
+    let model = DrivenDuffing {
+        delta: 0.3,
+        alpha: -1.0,
+        beta: 1.0,
+        gamma: 0.5,
+        omega: 1.2,
+    };
     const { assert!(<DrivenDuffing as ForcedLagrangian<1>>::STRUCTURE.uses_time) };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.1)?
         .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
@@ -50,7 +56,11 @@ fn main() -> Result<(), forced_vi::Error> {
     let lambda = model.doubled_lagrangian::<f64>(0.5, &[0.0], &[1.0], &[0.1], &[1.0]);
     assert!(lambda.is_finite());
 
-    let m = Mathieu { eps: 0.2, w: 2.0, c: 0.1 };
+    let m = Mathieu {
+        eps: 0.2,
+        w: 2.0,
+        c: 0.1,
+    };
     let s = <Mathieu as ForcedLagrangian<2>>::STRUCTURE;
     assert!(s.uses_time && !s.constant_mass);
     let run = Integrator::new(&m, Scheme::lobatto(2)?, 0.05)?

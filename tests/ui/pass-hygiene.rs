@@ -38,7 +38,13 @@ fn main() {
     use forced_vi::ForcedLagrangian;
     let m = Oscillator { k: 1.0, c: 0.1 };
     let _: () = Result::default();
-    assert_eq!(m.node_jacobian(&[0.0].into(), &[0.0].into()).b[(0, 0)], -0.1);
+    assert_eq!(
+        m.node_jacobian(&[0.0].into(), &[0.0].into()).b[(0, 0)],
+        -0.1
+    );
     let p = inner::Pair { w: 2.0 };
-    assert_eq!(p.mass_matrix(&[0.0; 2].into(), &[0.0; 2].into())[(1, 1)], 1.0);
+    assert_eq!(
+        p.mass_matrix(&[0.0; 2].into(), &[0.0; 2].into())[(1, 1)],
+        1.0
+    );
 }

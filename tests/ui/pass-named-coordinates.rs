@@ -20,13 +20,16 @@ pub struct CoupledVanDerPol {
 }
 
 fn main() -> Result<(), forced_vi::Error> {
-    let model = CoupledVanDerPol { eps: 0.5, rho: 0.02, lambda: 0.8 };
+    let model = CoupledVanDerPol {
+        eps: 0.5,
+        rho: 0.02,
+        lambda: 0.8,
+    };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.1)?
         .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
         .map_err(|failure| failure.error)?;
     assert!(run.last().is_some());
-    let lambda =
-        model.doubled_lagrangian::<f64>(0.0, &[0.0; 2], &[1.0; 2], &[0.1; 2], &[1.0; 2]);
+    let lambda = model.doubled_lagrangian::<f64>(0.0, &[0.0; 2], &[1.0; 2], &[0.1; 2], &[1.0; 2]);
     assert!(lambda.is_finite());
     Ok(())
 }
