@@ -200,3 +200,12 @@ pub fn fmt_time(t: f64) -> String {
         format!("{:.1} µs", t * 1e6)
     }
 }
+
+/// The verdict of a target in a section's table: `**met**` or `**not met**`.
+pub fn met(ok: bool) -> &'static str {
+    if ok {
+        "**met**"
+    } else {
+        "**not met**"
+    }
+}

@@ -5,15 +5,7 @@ use std::fmt::Write as _;
 
 use super::rows::{Row, Summary};
 use super::scaling::Exponent;
-use crate::report::table::{col, markdown};
-
-fn met(ok: bool) -> &'static str {
-    if ok {
-        "**met**"
-    } else {
-        "**not met**"
-    }
-}
+use crate::report::table::{col, markdown, met};
 
 fn us(x: Option<f64>) -> String {
     x.map_or("–".into(), |v| format!("{:.2}", v * 1e-3))

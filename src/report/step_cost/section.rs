@@ -3,15 +3,7 @@
 use std::fmt::Write as _;
 
 use super::rows::{Row, Summary};
-use crate::report::table::{col, markdown};
-
-fn met(ok: bool) -> &'static str {
-    if ok {
-        "**met**"
-    } else {
-        "**not met**"
-    }
-}
+use crate::report::table::{col, markdown, met};
 
 fn fmt_ns(x: Option<f64>) -> String {
     x.map_or("–".into(), |v| format!("{v:.0}"))
