@@ -1,0 +1,342 @@
+//! Method calls (on scalars and on iterators), function calls, indexing of coordinate
+//! arrays and casts.
+
+use std::collections::BTreeSet;
+
+use proc_macro2::TokenStream;
+use quote::{quote, quote_spanned};
+use syn::spanned::Spanned;
+use syn::{Expr, Ident, Lit};
+
+use super::control::pat_ident;
+use super::types::{var_degree, Local};
+use super::{compact, Degree, Idx, IntRange, Kind, Lowered, Lowerer, Var};
+
+impl Lowerer<'_> {
+    pub(super) fn method(&mut self, m: &syn::ExprMethodCall) -> Lowered {
+        let recv = self.expr(&m.receiver);
+        let name = m.method.to_string();
+        let method = &m.method;
+        if m.turbofish.is_some() {
+            return self.unsupported(m, "a turbofish");
+        }
+        match &recv.kind {
+            Kind::Array(g) => {
+                if name == "len" && m.args.is_empty() {
+                    let rt = recv.operand();
+                    let mut out = Lowered::new(quote!(#rt.#method()), Kind::Int);
+                    out.range = self.env.groups[*g]
+                        .len
+                        .literal()
+                        .and_then(|n| i64::try_from(n).ok())
+                        .map(IntRange::point);
+                    return out;
+                }
+                self.unsupported(
+                    m,
+                    "a method on a coordinate array (index it instead, as in `q[i]`, or use `.len()`)",
+                )
+            }
+            Kind::Iter(item) => self.iter_method(m, recv.clone(), (**item).clone()),
+            Kind::Dual | Kind::Real | Kind::Int => self.scalar_method(m, recv),
+            _ => self.unsupported(m, "this method call"),
+        }
+    }
+
+    pub(super) fn scalar_method(&mut self, m: &syn::ExprMethodCall, mut recv: Lowered) -> Lowered {
+        let name = m.method.to_string();
+        let mut method = m.method.clone();
+        let mut out = recv.clone();
+        out.atomic = true;
+        out.range = None;
+        out.lit_f64 = None;
+        let mut args = Vec::new();
+        let mut all_const = recv.degree == Degree::CONST;
+        for a in &m.args {
+            let la = self.expr(a);
+            out.absorb(&la);
+            all_const &= la.degree == Degree::CONST;
+            out.degree = out.degree.max(la.degree);
+            args.push(la);
+        }
+        let int_method = matches!(name.as_str(), "min" | "max" | "pow" | "abs" | "rem_euclid");
+        let all_int = recv.kind == Kind::Int && args.iter().all(|a| a.kind == Kind::Int);
+        if all_int && int_method {
+            let rt = recv.operand();
+            let at = args.iter().map(|a| &a.tokens);
+            out.kind = Kind::Int;
+            out.degree = Degree::CONST;
+            out.tokens = quote!(#rt.#method(#(#at),*));
+            return out;
+        }
+        // Everything else is real arithmetic: integer literals become `f64` (a receiver
+        // suffixed, `2.0_f64.sqrt()`, so that its type is known).
+        if let Some(x) = float_literal(&m.receiver) {
+            let l = proc_macro2::Literal::f64_suffixed(x);
+            recv.tokens = quote!(#l);
+            recv.atomic = true;
+        }
+        if recv.kind == Kind::Int {
+            if let Some(x) = recv.lit_f64.or_else(|| recv.int().map(|k| k as f64)) {
+                if x.is_finite() {
+                    let l = proc_macro2::Literal::f64_suffixed(x.abs());
+                    recv.tokens = if x < 0.0 { quote!((-#l)) } else { quote!(#l) };
+                    recv.kind = Kind::Real;
+                    recv.atomic = true;
+                }
+            }
+        }
+        recv.make_real();
+        if name != "powi" {
+            for a in &mut args {
+                a.make_real();
+            }
+        }
+        let any_dual = recv.kind == Kind::Dual || args.iter().any(|a| a.kind == Kind::Dual);
+        out.kind = if any_dual { Kind::Dual } else { Kind::Real };
+        let powi = (name == "powi")
+            .then(|| args.first().and_then(|a| a.int()))
+            .flatten()
+            .and_then(|n| u32::try_from(n).ok());
+        out.degree = match powi {
+            Some(n) if args.len() == 1 => recv.degree.times(n),
+            _ if all_const => Degree::CONST,
+            _ => out.degree.opaque(),
+        };
+        if !any_dual {
+            let rt = recv.operand();
+            let at = args.iter().map(|a| &a.tokens);
+            out.tokens = quote!(#rt.#method(#(#at),*));
+            return out;
+        }
+        let span = m.span();
+        if matches!(name.as_str(), "max" | "min") && args.len() == 1 {
+            // num-dual has no `max`/`min`: choose by comparing values.
+            let a = recv.as_dual(m.receiver.span());
+            let b = args.first().map(|x| x.as_dual(span)).unwrap_or_default();
+            let cmp = if name == "max" {
+                quote!(>=)
+            } else {
+                quote!(<=)
+            };
+            out.degree = out.degree.opaque();
+            out.tokens = quote_spanned! {span=>
+                {
+                    let __fvi_a: __D = #a;
+                    let __fvi_b: __D = #b;
+                    if __fvi_a #cmp __fvi_b { __fvi_a } else { __fvi_b }
+                }
+            };
+            return out;
+        }
+        if name == "powf" && args.first().is_some_and(|a| a.kind == Kind::Dual) {
+            method = Ident::new("powd", m.method.span());
+        }
+        // Methods whose arguments are `Self` in DualNum.
+        let method_name = method.to_string();
+        if matches!(method_name.as_str(), "mul_add" | "powd" | "atan2") {
+            for (a, orig) in args.iter_mut().zip(&m.args) {
+                a.tokens = a.as_dual(orig.span());
+                a.kind = Kind::Dual;
+            }
+        }
+        let rt = if recv.kind == Kind::Dual {
+            recv.operand()
+        } else {
+            recv.as_dual(m.receiver.span())
+        };
+        let at = args.iter().map(|a| &a.tokens);
+        out.tokens = quote!(#rt.#method(#(#at),*));
+        out
+    }
+
+    pub(super) fn iter_method(
+        &mut self,
+        m: &syn::ExprMethodCall,
+        recv: Lowered,
+        item: Kind,
+    ) -> Lowered {
+        let name = m.method.to_string();
+        let method = &m.method;
+        let rt = recv.operand();
+        let mut out = recv.clone();
+        out.atomic = true;
+        match name.as_str() {
+            "map" => {
+                let Some(Expr::Closure(c)) = m.args.first().filter(|_| m.args.len() == 1) else {
+                    return self.unsupported(m, "`.map` without a one-argument closure");
+                };
+                let (Some(pat), 1) = (c.inputs.first(), c.inputs.len()) else {
+                    return self.unsupported(c, "a closure with other than one argument");
+                };
+                let Some(ident) = pat_ident(pat) else {
+                    return self.unsupported(pat, "this closure argument");
+                };
+                let param = Local {
+                    kind: item,
+                    uses: recv.uses.clone(),
+                    names: BTreeSet::new(),
+                    degree: Degree::CONST,
+                    range: recv.range,
+                };
+                let body = self.repeated(&recv, ident, param, |l| l.expr(&c.body));
+                out.absorb(&body);
+                out.degree = out.degree.max(body.degree);
+                out.kind = Kind::Iter(Box::new(body.kind.clone()));
+                out.range = body.range;
+                let bt = &body.tokens;
+                let inputs = &c.inputs;
+                out.tokens = quote!(#rt.#method(|#inputs| #bt));
+            }
+            "sum" | "product" if m.args.is_empty() => {
+                let ty = match item {
+                    Kind::Dual => quote!(__D),
+                    Kind::Real => quote!(f64),
+                    Kind::Int => quote!(usize),
+                    _ => return self.unsupported(m, "this sum"),
+                };
+                if name == "product" {
+                    out.degree = out.degree.opaque();
+                }
+                out.range = None;
+                out.kind = item;
+                out.tokens = quote!(#rt.#method::<#ty>());
+            }
+            "rev" | "step_by" | "skip" | "take" => {
+                let mut args = Vec::new();
+                for a in &m.args {
+                    let la = self.expr(a);
+                    out.absorb(&la);
+                    args.push(la.tokens);
+                }
+                if name != "rev" {
+                    // Some of the values, not necessarily the ends.
+                    out.range = out.range.map(|r| IntRange { exact: false, ..r });
+                }
+                out.tokens = quote!(#rt.#method(#(#args),*));
+            }
+            _ => return self.unsupported(m, "this iterator method"),
+        }
+        out
+    }
+
+    pub(super) fn call(&mut self, c: &syn::ExprCall) -> Lowered {
+        let Expr::Path(func) = &*c.func else {
+            return self.unsupported(&c.func, "calling this");
+        };
+        let mut out = Lowered::new(TokenStream::new(), Kind::Real);
+        let mut args = Vec::new();
+        let mut degree = Degree::CONST;
+        for a in &c.args {
+            let la = self.expr(a);
+            out.absorb(&la);
+            degree = degree.max(la.degree);
+            if la.kind == Kind::Dual {
+                out.kind = Kind::Dual;
+            }
+            args.push(la.tokens);
+        }
+        out.degree = degree.opaque();
+        out.tokens = quote!(#func(#(#args),*));
+        out
+    }
+
+    pub(super) fn index(&mut self, i: &syn::ExprIndex) -> Lowered {
+        let base = self.expr(&i.expr);
+        let Kind::Array(g) = base.kind else {
+            return self.unsupported(i, "indexing anything but a coordinate array");
+        };
+        let idx = self.expr(&i.index);
+        let Some(group) = self.env.groups.get(g) else {
+            return Lowered::new(TokenStream::new(), Kind::Real);
+        };
+        let velocity = group.velocity.to_string();
+        let vel = base.names.contains(&velocity);
+        let name = if vel { &group.velocity } else { &group.name };
+        let len = group.len.literal();
+        let in_range = |k: i64| len.is_some_and(|n| usize::try_from(k).is_ok_and(|k| k < n));
+        let mut proven = false;
+        let at = match (idx.range, len) {
+            (Some(r), Some(_)) if in_range(r.lo) && in_range(r.hi) => {
+                proven = true;
+                match r.single().and_then(|k| usize::try_from(k).ok()) {
+                    Some(k) => Idx::At(k),
+                    None => Idx::All,
+                }
+            }
+            (Some(r), Some(n)) if r.exact && self.dead == 0 => {
+                let bad = if in_range(r.lo) { r.hi } else { r.lo };
+                let index = &i.index;
+                let shown = compact(&quote!(#index).to_string());
+                let which = if r.single().is_some() {
+                    format!("index {bad} is out of range")
+                } else {
+                    format!("index `{shown}` reaches {bad}, out of range")
+                };
+                self.cx.error_spanned_by(
+                    &i.index,
+                    format!(
+                        "{which}: `{name}` has {n} entries (`{}: [f64; {n}]`)",
+                        group.name
+                    ),
+                );
+                Idx::All
+            }
+            (Some(r), None) => match r.single().and_then(|k| usize::try_from(k).ok()) {
+                Some(k) => Idx::At(k),
+                None => Idx::All,
+            },
+            _ => Idx::All,
+        };
+        let mut out = Lowered::new(TokenStream::new(), Kind::Dual);
+        out.absorb(&base);
+        out.absorb(&idx);
+        out.uses.insert(Var {
+            vel,
+            group: g,
+            idx: at,
+        });
+        out.degree = var_degree(vel);
+        let (bt, it) = (&base.tokens, &idx.tokens);
+        out.tokens = if proven {
+            quote!(#bt[#it])
+        } else {
+            // Not proven in range: a checked access that yields NaN (and records the
+            // index for `check_model`) instead of panicking.
+            self.checked_index.set(true);
+            let index = &i.index;
+            let what = format!("{}[{}]", name, compact(&quote!(#index).to_string()));
+            let span = i.span();
+            quote_spanned!(span=> ::forced_vi::__private::at(&#bt[..], #it, #what))
+        };
+        out.atomic = true;
+        out
+    }
+
+    pub(super) fn cast(&mut self, c: &syn::ExprCast) -> Lowered {
+        let inner = self.expr(&c.expr);
+        let ty = &c.ty;
+        let is_float = matches!(&*c.ty, syn::Type::Path(p) if p.path.is_ident("f64"));
+        let mut out = inner.clone();
+        out.kind = if is_float { Kind::Real } else { Kind::Int };
+        out.lit_f64 = None;
+        if is_float || inner.kind != Kind::Int {
+            out.range = None;
+        }
+        let t = inner.operand();
+        out.tokens = quote!(#t as #ty);
+        out.atomic = false;
+        out
+    }
+}
+
+/// An unsuffixed, finite float literal (through parentheses).
+fn float_literal(e: &Expr) -> Option<f64> {
+    match e {
+        Expr::Paren(p) => float_literal(&p.expr),
+        Expr::Lit(syn::ExprLit {
+            lit: Lit::Float(f), ..
+        }) if f.suffix().is_empty() => f.base10_parse::<f64>().ok().filter(|x| x.is_finite()),
+        _ => None,
+    }
+}
