@@ -7,6 +7,7 @@ use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
+#[cfg(feature = "sparse")]
 use crate::sparse::{record_node_pattern, NodePattern, SparseNode, SparseStepper};
 use crate::stepper::Stepper;
 use crate::trajectory::{
@@ -256,6 +257,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 
     /// The sparse path's streaming stepper (DESIGN §9), for a model with sparse kernels.
     /// Fails with [`Error::SparsePathUnavailable`] without them or with tolerances set.
+    #[cfg(feature = "sparse")]
     pub fn sparse_stepper(
         &self,
         init: InitialState<N>,
@@ -281,6 +283,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     }
 
     /// The sparse kernels and their pattern if the run takes the sparse path.
+    #[cfg(feature = "sparse")]
     fn choose(
         &self,
         init: &InitialState<N>,
@@ -305,7 +308,19 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         Ok(Some((node, pattern)))
     }
 
+    /// Without the `sparse` feature every run takes the dense path.
+    #[cfg(not(feature = "sparse"))]
+    fn choose(&self, _init: &InitialState<N>) -> Result<Option<std::convert::Infallible>, Error> {
+        match self.linear_path {
+            LinearPath::Sparse => Err(Error::SparsePathUnavailable {
+                reason: "forced-vi was built without its `sparse` feature",
+            }),
+            LinearPath::Auto | LinearPath::Dense => Ok(None),
+        }
+    }
+
     /// Records the node pattern at the initial state (at `v = 0` for initial momenta).
+    #[cfg(feature = "sparse")]
     fn record_pattern(
         &self,
         node: &dyn SparseNode,
@@ -322,6 +337,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         }
     }
 
+    #[cfg(feature = "sparse")]
     fn open_sparse(
         &self,
         node: &'m dyn SparseNode,
@@ -340,10 +356,13 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         visit: impl FnOnce(&mut dyn Steps<N>) -> R,
     ) -> Result<R, Error> {
         match self.choose(&init)? {
+            #[cfg(feature = "sparse")]
             Some((node, pattern)) => {
                 let mut s = self.open_sparse(node, pattern, init, t_final)?;
                 Ok(visit(&mut s))
             }
+            #[cfg(not(feature = "sparse"))]
+            Some(never) => match never {},
             None => {
                 let mut s = self.stepper(init, t_final)?;
                 Ok(visit(&mut s))
@@ -543,6 +562,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for Stepper<'_, M, N> {
     }
 }
 
+#[cfg(feature = "sparse")]
 impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for SparseStepper<'_, M, N> {
     fn stats(&self) -> RunStats {
         SparseStepper::stats(self)

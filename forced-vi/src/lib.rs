@@ -79,6 +79,7 @@ pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
+#[cfg(feature = "sparse")]
 pub use sparse::SparseStepper;
 pub use stepper::Stepper;
 pub use trajectory::{

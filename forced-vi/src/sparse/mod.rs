@@ -16,16 +16,26 @@
 //! | the velocity solve `L_v(q, v) = p` | `velocity` |
 //! | the stepping loop: [`SparseStepper`] | `stepper`, `advance`, `state` |
 
+#[cfg(feature = "sparse")]
 mod advance;
+#[cfg(feature = "sparse")]
 mod equations;
+#[cfg(feature = "sparse")]
 mod lu;
+#[cfg(feature = "sparse")]
 mod newton;
 mod node;
+#[cfg(feature = "sparse")]
 mod pattern;
+#[cfg(feature = "sparse")]
 mod state;
+#[cfg(feature = "sparse")]
 mod stepper;
+#[cfg(feature = "sparse")]
 mod velocity;
 
 pub use node::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
+#[cfg(feature = "sparse")]
 pub(crate) use pattern::record_node_pattern;
+#[cfg(feature = "sparse")]
 pub use stepper::SparseStepper;
