@@ -45,7 +45,7 @@ impl Lowerer<'_> {
 
     pub(super) fn scalar_method(&mut self, m: &syn::ExprMethodCall, mut recv: Lowered) -> Lowered {
         let name = m.method.to_string();
-        let mut method = m.method.clone();
+        let method = &m.method;
         let mut out = recv.clone();
         out.atomic = true;
         out.range = None;
@@ -71,21 +71,7 @@ impl Lowerer<'_> {
         }
         // Everything else is real arithmetic: integer literals become `f64` (a receiver
         // suffixed, `2.0_f64.sqrt()`, so that its type is known).
-        if let Some(x) = float_literal(&m.receiver) {
-            let l = proc_macro2::Literal::f64_suffixed(x);
-            recv.tokens = quote!(#l);
-            recv.atomic = true;
-        }
-        if recv.kind == Kind::Int {
-            if let Some(x) = recv.lit_f64.or_else(|| recv.int().map(|k| k as f64)) {
-                if x.is_finite() {
-                    let l = proc_macro2::Literal::f64_suffixed(x.abs());
-                    recv.tokens = if x < 0.0 { quote!((-#l)) } else { quote!(#l) };
-                    recv.kind = Kind::Real;
-                    recv.atomic = true;
-                }
-            }
-        }
+        real_receiver(&m.receiver, &mut recv);
         recv.make_real();
         if name != "powi" {
             for a in &mut args {
@@ -109,45 +95,7 @@ impl Lowerer<'_> {
             out.tokens = quote!(#rt.#method(#(#at),*));
             return out;
         }
-        let span = m.span();
-        if matches!(name.as_str(), "max" | "min") && args.len() == 1 {
-            // num-dual has no `max`/`min`: choose by comparing values.
-            let a = recv.as_dual(m.receiver.span());
-            let b = args.first().map(|x| x.as_dual(span)).unwrap_or_default();
-            let cmp = if name == "max" {
-                quote!(>=)
-            } else {
-                quote!(<=)
-            };
-            out.degree = out.degree.opaque();
-            out.tokens = quote_spanned! {span=>
-                {
-                    let __fvi_a: __D = #a;
-                    let __fvi_b: __D = #b;
-                    if __fvi_a #cmp __fvi_b { __fvi_a } else { __fvi_b }
-                }
-            };
-            return out;
-        }
-        if name == "powf" && args.first().is_some_and(|a| a.kind == Kind::Dual) {
-            method = Ident::new("powd", m.method.span());
-        }
-        // Methods whose arguments are `Self` in DualNum.
-        let method_name = method.to_string();
-        if matches!(method_name.as_str(), "mul_add" | "powd" | "atan2") {
-            for (a, orig) in args.iter_mut().zip(&m.args) {
-                a.tokens = a.as_dual(orig.span());
-                a.kind = Kind::Dual;
-            }
-        }
-        let rt = if recv.kind == Kind::Dual {
-            recv.operand()
-        } else {
-            recv.as_dual(m.receiver.span())
-        };
-        let at = args.iter().map(|a| &a.tokens);
-        out.tokens = quote!(#rt.#method(#(#at),*));
-        out
+        dual_method(m, &recv, args, out)
     }
 
     pub(super) fn iter_method(
@@ -339,4 +287,76 @@ fn float_literal(e: &Expr) -> Option<f64> {
         }) if f.suffix().is_empty() => f.base10_parse::<f64>().ok().filter(|x| x.is_finite()),
         _ => None,
     }
+}
+
+/// A receiver that is a number literal as a suffixed `f64` literal (`2.0_f64.sqrt()`), so
+/// that the method call's type is known.
+fn real_receiver(receiver: &Expr, recv: &mut Lowered) {
+    if let Some(x) = float_literal(receiver) {
+        let l = proc_macro2::Literal::f64_suffixed(x);
+        recv.tokens = quote!(#l);
+        recv.atomic = true;
+    }
+    if recv.kind == Kind::Int {
+        if let Some(x) = recv.lit_f64.or_else(|| recv.int().map(|k| k as f64)) {
+            if x.is_finite() {
+                let l = proc_macro2::Literal::f64_suffixed(x.abs());
+                recv.tokens = if x < 0.0 { quote!((-#l)) } else { quote!(#l) };
+                recv.kind = Kind::Real;
+                recv.atomic = true;
+            }
+        }
+    }
+}
+
+/// A method call on real numbers of which some (the receiver or an argument) is a `__D`:
+/// the tokens of `out`, with the receiver and the arguments turned into what num-dual's
+/// `DualNum` takes.
+fn dual_method(
+    m: &syn::ExprMethodCall,
+    recv: &Lowered,
+    mut args: Vec<Lowered>,
+    mut out: Lowered,
+) -> Lowered {
+    let name = m.method.to_string();
+    let mut method = m.method.clone();
+    let span = m.span();
+    if matches!(name.as_str(), "max" | "min") && args.len() == 1 {
+        // num-dual has no `max`/`min`: choose by comparing values.
+        let a = recv.as_dual(m.receiver.span());
+        let b = args.first().map(|x| x.as_dual(span)).unwrap_or_default();
+        let cmp = if name == "max" {
+            quote!(>=)
+        } else {
+            quote!(<=)
+        };
+        out.degree = out.degree.opaque();
+        out.tokens = quote_spanned! {span=>
+            {
+                let __fvi_a: __D = #a;
+                let __fvi_b: __D = #b;
+                if __fvi_a #cmp __fvi_b { __fvi_a } else { __fvi_b }
+            }
+        };
+        return out;
+    }
+    if name == "powf" && args.first().is_some_and(|a| a.kind == Kind::Dual) {
+        method = Ident::new("powd", m.method.span());
+    }
+    // Methods whose arguments are `Self` in DualNum.
+    let method_name = method.to_string();
+    if matches!(method_name.as_str(), "mul_add" | "powd" | "atan2") {
+        for (a, orig) in args.iter_mut().zip(&m.args) {
+            a.tokens = a.as_dual(orig.span());
+            a.kind = Kind::Dual;
+        }
+    }
+    let rt = if recv.kind == Kind::Dual {
+        recv.operand()
+    } else {
+        recv.as_dual(m.receiver.span())
+    };
+    let at = args.iter().map(|a| &a.tokens);
+    out.tokens = quote!(#rt.#method(#(#at),*));
+    out
 }

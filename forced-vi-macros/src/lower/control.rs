@@ -156,17 +156,33 @@ impl Lowerer<'_> {
         }
         out.degree = degree;
         out.range = join_range(then_b.range, else_b.range);
+        let Some((tt, et)) = self.if_arms(i, &then_b, &else_b, &mut out) else {
+            return out;
+        };
+        out.tokens = quote!(#if_token #ct #tt else #et);
+        out
+    }
+
+    /// The tokens of the two arms of an `if` with an `else`, of one kind: an integer arm
+    /// beside an `f64` one becomes an `f64`, an `f64` (or integer) arm beside a `__D` one
+    /// becomes a `__D`. Sets the kind of `out` (and its range) to match; `None` if there is
+    /// no `else` after all.
+    fn if_arms(
+        &mut self,
+        i: &syn::ExprIf,
+        then_b: &Lowered,
+        else_b: &Lowered,
+        out: &mut Lowered,
+    ) -> Option<(TokenStream, TokenStream)> {
         let real_like = |k: &Kind| matches!(k, Kind::Real | Kind::Int | Kind::Dual);
         let mixed =
             then_b.kind != else_b.kind && real_like(&then_b.kind) && real_like(&else_b.kind);
         let to_real = mixed && then_b.kind != Kind::Dual && else_b.kind != Kind::Dual;
-        let (tt, et) = if to_real {
+        if to_real {
             // An integer branch beside an `f64` one: the integer is a number.
             out.kind = Kind::Real;
             out.range = None;
-            let Some((_, else_expr)) = &i.else_branch else {
-                return out;
-            };
+            let (_, else_expr) = i.else_branch.as_ref()?;
             let t = if then_b.kind == Kind::Int {
                 self.silently(|l| {
                     l.lift_real = true;
@@ -183,12 +199,10 @@ impl Lowerer<'_> {
             } else {
                 else_b.tokens.clone()
             };
-            (t, e)
+            Some((t, e))
         } else if mixed {
             out.kind = Kind::Dual;
-            let Some((_, else_expr)) = &i.else_branch else {
-                return out;
-            };
+            let (_, else_expr) = i.else_branch.as_ref()?;
             // Lift the `f64` branch so that both arms are `__D`.
             let t = if then_b.kind == Kind::Dual {
                 then_b.tokens.clone()
@@ -200,12 +214,10 @@ impl Lowerer<'_> {
             } else {
                 self.silently(|l| l.lift_branch(else_expr))
             };
-            (t, e)
+            Some((t, e))
         } else {
-            (then_b.tokens.clone(), else_b.tokens.clone())
-        };
-        out.tokens = quote!(#if_token #ct #tt else #et);
-        out
+            Some((then_b.tokens.clone(), else_b.tokens.clone()))
+        }
     }
 
     /// Lowers a loop body or a `map` closure, which runs any number of times: the locals it

@@ -201,8 +201,10 @@ impl Lowerer<'_> {
             BinOp::AddAssign(_)
             | BinOp::SubAssign(_)
             | BinOp::MulAssign(_)
-            | BinOp::DivAssign(_) => return self.assign(&b.left, Some(&b.op), &b.right),
-            BinOp::Add(_) | BinOp::Sub(_) | BinOp::Mul(_) | BinOp::Div(_) | BinOp::Rem(_) => {}
+            | BinOp::DivAssign(_) => self.assign(&b.left, Some(&b.op), &b.right),
+            BinOp::Add(_) | BinOp::Sub(_) | BinOp::Mul(_) | BinOp::Div(_) | BinOp::Rem(_) => {
+                self.arithmetic(b)
+            }
             BinOp::Eq(_)
             | BinOp::Lt(_)
             | BinOp::Le(_)
@@ -210,9 +212,14 @@ impl Lowerer<'_> {
             | BinOp::Ge(_)
             | BinOp::Gt(_)
             | BinOp::And(_)
-            | BinOp::Or(_) => return self.compare(b),
-            _ => return self.unsupported(b.op, "this operator"),
+            | BinOp::Or(_) => self.compare(b),
+            _ => self.unsupported(b.op, "this operator"),
         }
+    }
+
+    /// `l + r`, `l - r`, `l * r`, `l / r` and `l % r`: integer arithmetic (wrapping) between
+    /// integers, real or dual arithmetic otherwise.
+    fn arithmetic(&mut self, b: &syn::ExprBinary) -> Lowered {
         let mut l = self.expr(&b.left);
         let mut r = self.expr(&b.right);
         let op = &b.op;
@@ -226,18 +233,7 @@ impl Lowerer<'_> {
             (Kind::Int, Kind::Int) => Kind::Int,
             _ => Kind::Real,
         };
-        out.degree = match b.op {
-            BinOp::Add(_) | BinOp::Sub(_) => l.degree.max(r.degree),
-            BinOp::Mul(_) => l.degree.add(r.degree),
-            BinOp::Div(_) => {
-                if r.degree == Degree::CONST {
-                    l.degree
-                } else {
-                    l.degree.max(r.degree).opaque()
-                }
-            }
-            _ => l.degree.max(r.degree).opaque(),
-        };
+        out.degree = arithmetic_degree(b.op, l.degree, r.degree);
         if out.kind == Kind::Int {
             out.range = int_op(b.op, l.range, r.range);
             // Integer arithmetic wraps instead of panicking: an index that wraps is out of
@@ -376,5 +372,21 @@ impl Lowerer<'_> {
             None => quote!(#ident = #rt),
         };
         out
+    }
+}
+
+/// The polynomial degree of `l OP r` for an arithmetic operator.
+fn arithmetic_degree(op: BinOp, l: Degree, r: Degree) -> Degree {
+    match op {
+        BinOp::Add(_) | BinOp::Sub(_) => l.max(r),
+        BinOp::Mul(_) => l.add(r),
+        BinOp::Div(_) => {
+            if r == Degree::CONST {
+                l
+            } else {
+                l.max(r).opaque()
+            }
+        }
+        _ => l.max(r).opaque(),
     }
 }

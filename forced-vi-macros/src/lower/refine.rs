@@ -108,31 +108,8 @@ impl Lowerer<'_> {
                 let Some(k) = self.silently(|l| l.expr(other).int()) else {
                     return false;
                 };
-                // Normalise to `name OP k`.
-                let op = match (b.op, flipped) {
-                    (BinOp::Lt(_), true) => "gt",
-                    (BinOp::Le(_), true) => "ge",
-                    (BinOp::Gt(_), true) => "lt",
-                    (BinOp::Ge(_), true) => "le",
-                    (BinOp::Lt(_), false) => "lt",
-                    (BinOp::Le(_), false) => "le",
-                    (BinOp::Gt(_), false) => "gt",
-                    (BinOp::Ge(_), false) => "ge",
-                    (BinOp::Eq(_), _) => "eq",
-                    (BinOp::Ne(_), _) => "ne",
-                    _ => return false,
-                };
-                let op = if positive {
-                    op
-                } else {
-                    match op {
-                        "lt" => "ge",
-                        "le" => "gt",
-                        "gt" => "le",
-                        "ge" => "lt",
-                        "eq" => "ne",
-                        _ => "eq",
-                    }
+                let Some(op) = normalised(b.op, flipped, positive) else {
+                    return false;
                 };
                 let (lo, hi) = match op {
                     "lt" => (i64::MIN, k.saturating_sub(1)),
@@ -158,6 +135,38 @@ impl Lowerer<'_> {
             _ => !mentions_int_local(self, cond),
         }
     }
+}
+
+/// The comparison `op` (between `name` and `k`, or with `flipped` between `k` and `name`)
+/// as `name OP k` where it holds (`positive`) or where it does not: `"lt"`, `"le"`, `"gt"`,
+/// `"ge"`, `"eq"` or `"ne"`; `None` for an operator that is no comparison.
+fn normalised(op: BinOp, flipped: bool, positive: bool) -> Option<&'static str> {
+    // Normalise to `name OP k`.
+    let op = match (op, flipped) {
+        (BinOp::Lt(_), true) => "gt",
+        (BinOp::Le(_), true) => "ge",
+        (BinOp::Gt(_), true) => "lt",
+        (BinOp::Ge(_), true) => "le",
+        (BinOp::Lt(_), false) => "lt",
+        (BinOp::Le(_), false) => "le",
+        (BinOp::Gt(_), false) => "gt",
+        (BinOp::Ge(_), false) => "ge",
+        (BinOp::Eq(_), _) => "eq",
+        (BinOp::Ne(_), _) => "ne",
+        _ => return None,
+    };
+    Some(if positive {
+        op
+    } else {
+        match op {
+            "lt" => "ge",
+            "le" => "gt",
+            "gt" => "le",
+            "ge" => "lt",
+            "eq" => "ne",
+            _ => "eq",
+        }
+    })
 }
 
 /// The interval of `l OP r` for integers (`None`: unknown).
