@@ -97,50 +97,16 @@ impl Analysis<'_> {
         weight: &[TokenStream],
         out: &mut Vec<Local>,
     ) -> Option<()> {
-        let with = |f: TokenStream| -> Vec<TokenStream> {
-            let mut w = weight.to_vec();
-            w.push(f);
-            w
-        };
-        let within = |lp: Loop| -> Vec<Loop> {
-            let mut l = loops.to_vec();
-            l.push(lp);
-            l
-        };
-        let neg = TokenStream::new;
         match e {
             Expr::Paren(p) => self.decompose(&p.expr, loops, weight, out),
             Expr::Group(g) => self.decompose(&g.expr, loops, weight, out),
             Expr::Unary(u) if matches!(u.op, UnOp::Neg(_)) => {
-                self.decompose(&u.expr, loops, &with(neg()), out)
+                self.decompose(&u.expr, loops, &with(weight, negative()), out)
             }
-            Expr::Binary(b) => match b.op {
-                BinOp::Add(_) | BinOp::Sub(_) => {
-                    let right = if matches!(b.op, BinOp::Sub(_)) {
-                        with(neg())
-                    } else {
-                        weight.to_vec()
-                    };
-                    self.decompose(&b.left, loops, weight, out)?;
-                    self.decompose(&b.right, loops, &right, out)
-                }
-                BinOp::Mul(_) => match (
-                    self.constant(&b.left, loops),
-                    self.constant(&b.right, loops),
-                ) {
-                    (Some(f), _) => self.decompose(&b.right, loops, &with(f), out),
-                    (None, Some(f)) => self.decompose(&b.left, loops, &with(f), out),
-                    _ => self.leaf(e, loops, weight, out),
-                },
-                BinOp::Div(_) => match self.constant(&b.right, loops) {
-                    Some(f) => self.decompose(&b.left, loops, &with(quote!(1.0 / #f)), out),
-                    None => self.leaf(e, loops, weight, out),
-                },
-                _ => self.leaf(e, loops, weight, out),
-            },
+            Expr::Binary(b) => self.decompose_binary(e, b, loops, weight, out),
             Expr::MethodCall(m) if m.method == "sum" && m.args.is_empty() => {
                 match self.index_sum(m, loops) {
-                    Some((lp, body)) => self.decompose(body, &within(lp), weight, out),
+                    Some((lp, body)) => self.decompose(body, &within(loops, lp), weight, out),
                     None => self.leaf(e, loops, weight, out),
                 }
             }
@@ -152,27 +118,74 @@ impl Analysis<'_> {
                 }
             }
             Expr::Block(b) if b.label.is_none() => match accumulation(&b.block) {
-                Some(parts) => {
-                    for (var_iter, body, negative) in parts {
-                        let w = if negative {
-                            with(neg())
-                        } else {
-                            weight.to_vec()
-                        };
-                        match var_iter {
-                            Some((var, iter)) => {
-                                let lp = self.iterator(var, iter, &body, loops)?;
-                                self.decompose(&body, &within(lp), &w, out)?;
-                            }
-                            None => self.decompose(&body, loops, &w, out)?,
-                        }
-                    }
-                    Some(())
-                }
+                Some(parts) => self.decompose_accumulation(parts, loops, weight, out),
                 None => self.leaf(e, loops, weight, out),
             },
             _ => self.leaf(e, loops, weight, out),
         }
+    }
+
+    /// A sum or difference (split into its operands), or a product or quotient with a
+    /// constant factor (which joins the weight); anything else is one term (`e`).
+    fn decompose_binary(
+        &self,
+        e: &Expr,
+        b: &syn::ExprBinary,
+        loops: &[Loop],
+        weight: &[TokenStream],
+        out: &mut Vec<Local>,
+    ) -> Option<()> {
+        match b.op {
+            BinOp::Add(_) | BinOp::Sub(_) => {
+                let right = if matches!(b.op, BinOp::Sub(_)) {
+                    with(weight, negative())
+                } else {
+                    weight.to_vec()
+                };
+                self.decompose(&b.left, loops, weight, out)?;
+                self.decompose(&b.right, loops, &right, out)
+            }
+            BinOp::Mul(_) => match (
+                self.constant(&b.left, loops),
+                self.constant(&b.right, loops),
+            ) {
+                (Some(f), _) => self.decompose(&b.right, loops, &with(weight, f), out),
+                (None, Some(f)) => self.decompose(&b.left, loops, &with(weight, f), out),
+                _ => self.leaf(e, loops, weight, out),
+            },
+            BinOp::Div(_) => match self.constant(&b.right, loops) {
+                Some(f) => self.decompose(&b.left, loops, &with(weight, quote!(1.0 / #f)), out),
+                None => self.leaf(e, loops, weight, out),
+            },
+            _ => self.leaf(e, loops, weight, out),
+        }
+    }
+
+    /// The parts of an accumulation block (see `syntax::accumulation`): each `for` loop's
+    /// body inside its loop, each other part as it is, with its sign.
+    #[allow(clippy::type_complexity)]
+    fn decompose_accumulation(
+        &self,
+        parts: Vec<(Option<(&Ident, &Expr)>, Expr, bool)>,
+        loops: &[Loop],
+        weight: &[TokenStream],
+        out: &mut Vec<Local>,
+    ) -> Option<()> {
+        for (var_iter, body, negative_part) in parts {
+            let w = if negative_part {
+                with(weight, negative())
+            } else {
+                weight.to_vec()
+            };
+            match var_iter {
+                Some((var, iter)) => {
+                    let lp = self.iterator(var, iter, &body, loops)?;
+                    self.decompose(&body, &within(loops, lp), &w, out)?;
+                }
+                None => self.decompose(&body, loops, &w, out)?,
+            }
+        }
+        Some(())
     }
 
     /// An `f64` constant (literals, parameters and loop variables, no coordinate and no
@@ -401,6 +414,25 @@ impl Analysis<'_> {
         local.row = Some(row);
         Some(local)
     }
+}
+
+/// The factor `-1` of a weight (an empty factor).
+fn negative() -> TokenStream {
+    TokenStream::new()
+}
+
+/// `weight` with one more factor.
+fn with(weight: &[TokenStream], f: TokenStream) -> Vec<TokenStream> {
+    let mut w = weight.to_vec();
+    w.push(f);
+    w
+}
+
+/// `loops` with one more loop inside.
+fn within(loops: &[Loop], lp: Loop) -> Vec<Loop> {
+    let mut l = loops.to_vec();
+    l.push(lp);
+    l
 }
 
 /// The product of the factors (an empty one is `-1`); `None` for 1.
