@@ -1,0 +1,467 @@
+//! The expand phase: generates the impl from a checked model. Nothing here validates.
+//!
+//! Generated items, all reaching the runtime through `::forced_vi::__private`:
+//! - `impl ForcedLagrangian<N>`: `lagrangian`, `force` (only with a force), `STRUCTURE`,
+//!   `coordinate_names`, `check_parameters`, and the specialised kernels `node_gradient`,
+//!   `node_jacobian` and `mass_matrix`;
+//! - for a driven model (one that names `t`): `lagrangian_at` and `force_at` instead, with
+//!   `lagrangian`/`force` their values at `t = 0`, `STRUCTURE.uses_time`, and no
+//!   specialised kernels (the runtime's general ones take the time);
+//! - an inherent `doubled_lagrangian` and one hidden helper per non-polynomial term of `L`
+//!   and per force entry.
+//!
+//! The kernels add up, per block, only what the model has: polynomial terms as `f64` code
+//! derived at compile time (see `poly`), other terms with the smallest dual number over the
+//! variables they use, and the force only where it acts; they are generated in `kernels`
+//! (with `slots` for where they write).
+
+use std::collections::BTreeSet;
+
+use proc_macro2::{Literal, Span, TokenStream};
+use quote::{format_ident, quote};
+use syn::Ident;
+
+use crate::check::{Checked, CheckedForce};
+use crate::lower::{dual_ident, Env, Len, Lowered, TIME};
+
+mod kernels;
+mod slots;
+
+fn fvi() -> TokenStream {
+    quote!(::forced_vi::__private)
+}
+
+fn lit(n: usize) -> Literal {
+    Literal::usize_unsuffixed(n)
+}
+
+/// `let` bindings for the model names an expression uses: coordinates and velocities from
+/// the arrays `q` and `v`, parameters from `self`.
+pub fn bindings(
+    env: &Env,
+    n: &Len,
+    names: &BTreeSet<String>,
+    q: &Ident,
+    v: &Ident,
+    scalar: &TokenStream,
+) -> TokenStream {
+    let mut out = TokenStream::new();
+    for g in &env.groups {
+        for (name, arr) in [(&g.name, q), (&g.velocity, v)] {
+            if !names.contains(&name.to_string()) {
+                continue;
+            }
+            let offset = lit(g.offset);
+            let len = &g.len;
+            out.extend(if !g.array {
+                quote!(let #name: #scalar = #arr[#offset];)
+            } else if env.groups.len() == 1 {
+                quote!(let #name: &[#scalar; #n] = #arr;)
+            } else {
+                quote!(let #name: [#scalar; #len] = ::core::array::from_fn(|__fvi_k| #arr[#offset + __fvi_k]);)
+            });
+        }
+    }
+    for p in &env.params {
+        if names.contains(&p.to_string()) {
+            out.extend(quote!(let #p: f64 = self.#p;));
+        }
+    }
+    out
+}
+
+/// All parameters as `f64` locals (for polynomial coefficients), allowed to go unused.
+fn param_bindings(env: &Env) -> TokenStream {
+    let ps = &env.params;
+    quote!(#( #[allow(unused_variables)] let #ps: f64 = self.#ps; )*)
+}
+
+/// The generated code for a checked model.
+pub fn generate(c: &Checked) -> TokenStream {
+    let g = Gen::new(c);
+    let timed = c.uses_time;
+    // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
+    // also computes its dense blocks through them.
+    let split = c.split.as_ref();
+    let through = split.is_some() && crate::sparse::dense_through_split(c);
+    let lagrangian = g.lagrangian();
+    // Helpers: non-polynomial terms and force entries.
+    let mut helpers = g.term_helpers(timed || through);
+    let force_method = match &c.force {
+        Some(force) => g.force_items(force, &mut helpers),
+        None => TokenStream::new(),
+    };
+    // A driven model keeps the runtime's general kernels (they take `t`), and their stack
+    // bound; an autonomous one gets the specialised kernels.
+    let fvi = &g.fvi;
+    let kernels_and_stack = (!timed && !through).then(|| {
+        let (kernels, stack) = kernels::kernels(c);
+        let stack_bytes = stack
+            .into_iter()
+            .reduce(|a, b| quote!(#fvi::max_usize(#a, #b)));
+        quote! {
+            const KERNEL_STACK_BYTES: usize = #stack_bytes;
+            #kernels
+        }
+    });
+    let check_model = c.checked_index.then(|| g.check_model());
+    let (split_items, sparse_impl) = match split {
+        Some(s) => {
+            helpers.extend(crate::sparse::helpers(c, s));
+            (crate::sparse::trait_items(c), crate::sparse::sparse_impl(c))
+        }
+        None => (TokenStream::new(), TokenStream::new()),
+    };
+    let items = quote! {
+        #lagrangian
+        #force_method
+    };
+    let trait_impl = g.trait_impl(items, check_model, kernels_and_stack, split_items);
+    let inherent_impl = g.inherent_impl(helpers);
+    let item = &c.model.item;
+    quote! {
+        #item
+
+        #trait_impl
+
+        #sparse_impl
+
+        #inherent_impl
+    }
+}
+
+/// What the generated items of one model share: the model, the runtime's path and the
+/// names of the scalar and of the arguments.
+struct Gen<'c, 'm> {
+    c: &'c Checked<'m>,
+    fvi: TokenStream,
+    /// The generic scalar `__D` and its bound.
+    d: Ident,
+    scalar_bound: TokenStream,
+    /// The coordinates, velocities and time arguments.
+    dq: Ident,
+    dv: Ident,
+    dt: Ident,
+    /// `__fvi_t: __D,` in the parameters of a driven model's helpers, `__fvi_t,` in calls.
+    time_param: Option<TokenStream>,
+    time_arg: Option<TokenStream>,
+}
+
+impl<'c, 'm> Gen<'c, 'm> {
+    fn new(c: &'c Checked<'m>) -> Self {
+        let fvi = fvi();
+        let d = dual_ident();
+        let dt = format_ident!("__fvi_t");
+        let timed = c.uses_time;
+        Gen {
+            c,
+            scalar_bound: quote!(#fvi::Scalar),
+            fvi,
+            time_param: timed.then(|| quote!(#dt: #d,)),
+            time_arg: timed.then(|| quote!(#dt,)),
+            d,
+            dq: format_ident!("__fvi_q"),
+            dv: format_ident!("__fvi_v"),
+            dt,
+        }
+    }
+
+    /// In a driven model, `t` bound from the `__fvi_t` argument where an expression uses it.
+    fn time_binding(&self, names: &BTreeSet<String>) -> TokenStream {
+        let (d, dt) = (&self.d, &self.dt);
+        let time = Ident::new(TIME, Span::call_site());
+        if names.contains(TIME) {
+            quote!(let #time: #d = #dt;)
+        } else {
+            quote!(let _ = #dt;)
+        }
+    }
+
+    /// `let` bindings for the model names in `names`, from `__fvi_q`, `__fvi_v` and `self`.
+    fn bindings(&self, names: &BTreeSet<String>) -> TokenStream {
+        let d = &self.d;
+        bindings(
+            &self.c.env,
+            &self.c.n,
+            names,
+            &self.dq,
+            &self.dv,
+            &quote!(#d),
+        )
+    }
+
+    /// L(q, v), generic; for a driven model L(t, q, v), with `lagrangian` its value at t = 0.
+    fn lagrangian(&self) -> TokenStream {
+        let c = self.c;
+        let (fvi, n, d, scalar_bound) = (&self.fvi, &c.n, &self.d, &self.scalar_bound);
+        let (dq, dv, dt) = (&self.dq, &self.dv, &self.dt);
+        let l_bind = self.bindings(&c.lagrangian.names);
+        let l_body = lowered_dual(&c.lagrangian);
+        if c.uses_time {
+            let t_bind = self.time_binding(&c.lagrangian.names);
+            quote! {
+                #[inline]
+                #[allow(unused_braces, unused_parens)]
+                fn lagrangian_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                    #t_bind
+                    #l_bind
+                    #l_body
+                }
+                #[inline]
+                fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                    <Self as #fvi::ForcedLagrangian<#n>>::lagrangian_at(self, #d::from(0.0), #dq, #dv)
+                }
+            }
+        } else {
+            quote! {
+                #[inline]
+                #[allow(unused_braces, unused_parens)]
+                fn lagrangian<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                    #l_bind
+                    #l_body
+                }
+            }
+        }
+    }
+
+    /// One hidden helper per non-polynomial term of `L`, unless `general`: a driven model
+    /// uses the runtime's general kernels, which call no term helper; nor do kernels that go
+    /// through the per-term code.
+    fn term_helpers(&self, general: bool) -> TokenStream {
+        let c = self.c;
+        let (n, d, scalar_bound, dq, dv) = (&c.n, &self.d, &self.scalar_bound, &self.dq, &self.dv);
+        let mut helpers = TokenStream::new();
+        let dual_terms: &[crate::check::Term] = if general { &[] } else { &c.dual_terms };
+        for (k, t) in dual_terms.iter().enumerate() {
+            let name = format_ident!("__fvi_l{}", k);
+            let bind = self.bindings(&t.lowered.names);
+            let body = lowered_dual(&t.lowered);
+            helpers.extend(quote! {
+                #[doc(hidden)]
+                #[inline(always)]
+                #[allow(unused_braces, unused_parens)]
+                fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                    #bind
+                    #body
+                }
+            });
+        }
+        helpers
+    }
+
+    /// The force: one hidden helper per entry (added to `helpers`), and the `force` method
+    /// (`force_at` and `force` for a driven model) that calls them.
+    fn force_items(&self, force: &CheckedForce, helpers: &mut TokenStream) -> TokenStream {
+        let c = self.c;
+        let (fvi, n, d, scalar_bound) = (&self.fvi, &c.n, &self.d, &self.scalar_bound);
+        let (dq, dv, dt, time_param) = (&self.dq, &self.dv, &self.dt, &self.time_param);
+        for (k, f) in force.fns.iter().enumerate() {
+            let name = format_ident!("__fvi_f{}", k);
+            let bind = self.bindings(&f.lowered.names);
+            let t_bind = c.uses_time.then(|| self.time_binding(&f.lowered.names));
+            let body = lowered_dual(&f.lowered);
+            let index = f.index.as_ref().map(|i| quote!(, #i: usize));
+            helpers.extend(quote! {
+                #[doc(hidden)]
+                #[inline(always)]
+                #[allow(unused_braces, unused_parens)]
+                fn #name<#d: #scalar_bound>(&self, #time_param #dq: &[#d; #n], #dv: &[#d; #n] #index) -> #d {
+                    #t_bind
+                    #bind
+                    #body
+                }
+            });
+        }
+        let body = self.force_body(force);
+        if c.uses_time {
+            quote! {
+                #[inline]
+                #[allow(unused_braces, unused_parens)]
+                fn force_at<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    #body
+                }
+                #[inline]
+                fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    <Self as #fvi::ForcedLagrangian<#n>>::force_at(self, #d::from(0.0), #dq, #dv)
+                }
+            }
+        } else {
+            quote! {
+                #[inline]
+                #[allow(unused_braces, unused_parens)]
+                fn force<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> [#d; #n] {
+                    #body
+                }
+            }
+        }
+    }
+
+    /// The force as an array: one helper call per row, or `from_fn` over the one entry of a
+    /// const-generic model.
+    fn force_body(&self, force: &CheckedForce) -> TokenStream {
+        let (dq, dv, time_arg) = (&self.dq, &self.dv, &self.time_arg);
+        match &self.c.n {
+            Len::Lit(_) => {
+                let calls = force.rows.iter().map(|r| {
+                    let name = format_ident!("__fvi_f{}", r.func);
+                    let index = r.index.map(|i| {
+                        let i = lit(i);
+                        quote!(, #i)
+                    });
+                    quote!(self.#name(#time_arg #dq, #dv #index))
+                });
+                quote!([#(#calls),*])
+            }
+            Len::Param(_) => {
+                quote!(::core::array::from_fn(|__fvi_k| self.__fvi_f0(#time_arg #dq, #dv, __fvi_k)))
+            }
+        }
+    }
+
+    /// `check_model`, for a model with indices checked at run time.
+    fn check_model(&self) -> TokenStream {
+        let (fvi, n) = (&self.fvi, &self.c.n);
+        let force = self.c.force.as_ref().map(|_| {
+            quote!(let _ = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &__fvi_z, &__fvi_z);)
+        });
+        quote! {
+            fn check_model(&self) -> ::core::result::Result<(), ::std::string::String> {
+                // Indices that the macro could not prove in range are checked accesses;
+                // one evaluation runs every loop iteration and reports the first that
+                // falls outside.
+                let _ = #fvi::take_index_fault();
+                let __fvi_z = [0.0f64; #n];
+                let _ = <Self as #fvi::ForcedLagrangian<#n>>::lagrangian::<f64>(self, &__fvi_z, &__fvi_z);
+                #force
+                match #fvi::take_index_fault() {
+                    ::core::option::Option::Some(__fvi_what) => ::core::result::Result::Err(::std::format!(
+                        "index `{}` is out of range: the model has {} coordinates",
+                        __fvi_what, #n
+                    )),
+                    ::core::option::Option::None => ::core::result::Result::Ok(()),
+                }
+            }
+        }
+    }
+
+    /// `impl ForcedLagrangian<N>`: the structure, the names, `items` (the Lagrangian and the
+    /// force), the parameter check, then the optional items.
+    fn trait_impl(
+        &self,
+        items: TokenStream,
+        check_model: Option<TokenStream>,
+        kernels_and_stack: Option<TokenStream>,
+        split_items: TokenStream,
+    ) -> TokenStream {
+        let c = self.c;
+        let (fvi, n) = (&self.fvi, &c.n);
+        let item = &c.model.item;
+        let ident = &item.ident;
+        let (ig, tg, wc) = item.generics.split_for_impl();
+        let has_force = c.force.is_some();
+        let force_uses_velocity = c.force.as_ref().is_some_and(|f| f.uses_v);
+        let constant_mass = c.constant_mass;
+        let timed = c.uses_time;
+        let names = coordinate_names(c);
+        let checks = c.env.params.iter().map(|p| {
+            let s = p.to_string();
+            quote!(if !self.#p.is_finite() { return ::core::result::Result::Err(#s); })
+        });
+        quote! {
+            #[automatically_derived]
+            impl #ig #fvi::ForcedLagrangian<#n> for #ident #tg #wc {
+                const STRUCTURE: #fvi::Structure = #fvi::Structure {
+                    has_force: #has_force,
+                    force_uses_velocity: #force_uses_velocity,
+                    constant_mass: #constant_mass,
+                    uses_time: #timed,
+                };
+                fn coordinate_names(&self) -> [&'static str; #n] {
+                    #names
+                }
+                #items
+                fn check_parameters(&self) -> ::core::result::Result<(), &'static str> {
+                    #(#checks)*
+                    ::core::result::Result::Ok(())
+                }
+                #check_model
+                #kernels_and_stack
+                #split_items
+            }
+        }
+    }
+
+    /// The inherent impl: `doubled_lagrangian` and the hidden `helpers`.
+    fn inherent_impl(&self, helpers: TokenStream) -> TokenStream {
+        let (fvi, n, d, scalar_bound) = (&self.fvi, &self.c.n, &self.d, &self.scalar_bound);
+        let item = &self.c.model.item;
+        let ident = &item.ident;
+        let (ig, tg, wc) = item.generics.split_for_impl();
+        quote! {
+            #[automatically_derived]
+            impl #ig #ident #tg #wc {
+                /// Galley's doubled Lagrangian `Λ(t, q, v, Q, V) = L(t, Q, V) − L(t, q, v)
+                /// + ½ (F(t, q, v) + F(t, Q, V)) · (Q − q)` of this model (`t` is ignored by an
+                /// autonomous model).
+                #[allow(dead_code)]
+                pub fn doubled_lagrangian<#d: #scalar_bound>(
+                    &self,
+                    t: #d,
+                    q: &[#d; #n],
+                    v: &[#d; #n],
+                    big_q: &[#d; #n],
+                    big_v: &[#d; #n],
+                ) -> #d {
+                    #fvi::doubled::doubled_lagrangian_at(self, t, q, v, big_q, big_v)
+                }
+                #helpers
+            }
+        }
+    }
+}
+
+/// The lowered tokens as a `__D` value, spanned at the user's expression.
+/// In expression position (`identity(...)`), so that a body starting with a block or an
+/// `if` is not read as a statement.
+fn lowered_dual(l: &Lowered) -> TokenStream {
+    let span = l
+        .tokens
+        .clone()
+        .into_iter()
+        .next()
+        .map_or_else(Span::call_site, |t| t.span());
+    let t = l.as_dual(span);
+    let starts_like_statement = match t.clone().into_iter().next() {
+        Some(proc_macro2::TokenTree::Group(g)) => g.delimiter() == proc_macro2::Delimiter::Brace,
+        Some(proc_macro2::TokenTree::Ident(i)) => i == "if" || i == "for",
+        _ => false,
+    };
+    if starts_like_statement && !(l.stmt_like && l.kind == crate::lower::Kind::Dual) {
+        quote!(::core::convert::identity::<__D>(#t))
+    } else {
+        t
+    }
+}
+
+fn coordinate_names(c: &Checked) -> TokenStream {
+    match &c.n {
+        Len::Lit(_) => {
+            let mut names = Vec::new();
+            for g in &c.env.groups {
+                match g.len.literal() {
+                    Some(len) if g.array => {
+                        for k in 0..len {
+                            names.push(format!("{}[{k}]", g.name));
+                        }
+                    }
+                    _ => names.push(g.name.to_string()),
+                }
+            }
+            quote!([#(#names),*])
+        }
+        Len::Param(p) => {
+            let name = c.env.groups.first().map(|g| g.name.to_string());
+            quote!([#name; #p])
+        }
+    }
+}
