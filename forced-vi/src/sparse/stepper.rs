@@ -14,7 +14,7 @@ use crate::sparse::newton::SparseNewton;
 use crate::sparse::node::{NodePattern, NodeSink, SparseNode};
 use crate::sparse::state::{energy, State};
 use crate::sparse::velocity::{outside_pattern, VelocitySolver};
-use crate::stepper::step_count;
+use crate::stepper::{check_finite, check_run, step_count};
 use crate::trajectory::{non_finite_field, RunStats, StepRecord};
 
 /// Steps a model with sparse node kernels; an iterator over [`StepRecord`]s, initial state
@@ -51,14 +51,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> SparseStepper<'a, M, N> {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Self, Error> {
-        if !(t_final.is_finite() && t_final >= 0.0) {
-            return Err(Error::InvalidFinalTime { t_final });
-        }
-        integ
-            .options
-            .newton
-            .validate()
-            .map_err(|(field, value)| Error::InvalidNewtonOptions { field, value })?;
+        check_run(&integ.options, t_final)?;
         if pattern.n() != N || node.dof() != N {
             return Err(Error::InvalidModel {
                 message: format!(
@@ -80,40 +73,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> SparseStepper<'a, M, N> {
             message: "the sparse step pattern cannot be analysed".into(),
         })?;
         let mut state = State::new(N, scheme.stages());
-        let (q0, p0, v0) = (&mut state.q.sum, &mut state.p.sum, &mut state.v);
-        let check = |what: &'static str, x: &[f64]| match x.iter().position(|c| !c.is_finite()) {
-            Some(index) => Err(Error::NonFiniteInitialData { what, index }),
-            None => Ok(()),
-        };
-        match init {
-            InitialState::Velocity { q, v } => {
-                check("q", &q)?;
-                check("v", &v)?;
-                q0.copy_from_slice(&q);
-                v0.copy_from_slice(&v);
-                velocity.check_mass(node, &prob.pattern, (0.0, q0, v0))?;
-                let mut sink = NodeSink::gradient(&mut prob.fq[..N], p0);
-                node.eval(0.0, q0, v0, &mut sink);
-                if sink.outside() {
-                    return Err(outside_pattern());
-                }
-            }
-            InitialState::Momentum { q, p } => {
-                check("q", &q)?;
-                check("p", &p)?;
-                q0.copy_from_slice(&q);
-                p0.copy_from_slice(&p);
-                velocity.solve(node, &prob.pattern, (0.0, q0, p0), v0, 0)?;
-            }
-        }
-        let mut lv = vec![0.0; N];
-        let mut sink = NodeSink::gradient(&mut prob.fq[..N], &mut lv);
-        node.eval(0.0, q0, v0, &mut sink);
-        let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
-        if !(finite(&prob.fq[..N]) && finite(p0)) {
-            return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
-        }
-        state.scale_f = prob.fq[..N].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        initial_state::<N>(&mut prob, &mut velocity, &mut state, init)?;
         state.h_prev = h;
         let energy0 = energy(node, 0.0, &state.q.sum, &state.v, &state.p.sum)
             .ok_or(Error::NonFiniteModel { step: 0, t: 0.0 })?;
@@ -249,4 +209,46 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> SparseStepper<'a, M, N> {
             }
         }
     }
+}
+
+/// Checks the initial data and fills `(q, v, p)` of `state` from it (`p_0 = L_v(q_0, v_0)`, or
+/// `v_0` by the velocity solve) and the force scale `|L_q + F|` at the start.
+fn initial_state<const N: usize>(
+    prob: &mut SparseStep<'_>,
+    velocity: &mut VelocitySolver,
+    state: &mut State,
+    init: InitialState<N>,
+) -> Result<(), Error> {
+    let node = prob.node;
+    let (q0, p0, v0) = (&mut state.q.sum, &mut state.p.sum, &mut state.v);
+    match init {
+        InitialState::Velocity { q, v } => {
+            check_finite("q", &q)?;
+            check_finite("v", &v)?;
+            q0.copy_from_slice(&q);
+            v0.copy_from_slice(&v);
+            velocity.check_mass(node, &prob.pattern, (0.0, q0, v0))?;
+            let mut sink = NodeSink::gradient(&mut prob.fq[..N], p0);
+            node.eval(0.0, q0, v0, &mut sink);
+            if sink.outside() {
+                return Err(outside_pattern());
+            }
+        }
+        InitialState::Momentum { q, p } => {
+            check_finite("q", &q)?;
+            check_finite("p", &p)?;
+            q0.copy_from_slice(&q);
+            p0.copy_from_slice(&p);
+            velocity.solve(node, &prob.pattern, (0.0, q0, p0), v0, 0)?;
+        }
+    }
+    let mut lv = vec![0.0; N];
+    let mut sink = NodeSink::gradient(&mut prob.fq[..N], &mut lv);
+    node.eval(0.0, q0, v0, &mut sink);
+    let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
+    if !(finite(&prob.fq[..N]) && finite(p0)) {
+        return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+    }
+    state.scale_f = prob.fq[..N].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    Ok(())
 }

@@ -1,0 +1,87 @@
+//! Checks shared by the dense and the sparse stepper: of a run's final time and options, of
+//! initial data, of a model's time flag; the step count; the error for a non-finite value.
+
+use nalgebra::SVector;
+
+use crate::error::Error;
+use crate::integrator::StepOptions;
+use crate::model::ForcedLagrangian;
+
+/// Refuses a final time that is negative or not finite, and invalid Newton options.
+pub(crate) fn check_run(options: &StepOptions, t_final: f64) -> Result<(), Error> {
+    if !(t_final.is_finite() && t_final >= 0.0) {
+        return Err(Error::InvalidFinalTime { t_final });
+    }
+    options
+        .newton
+        .validate()
+        .map_err(|(field, value)| Error::InvalidNewtonOptions { field, value })
+}
+
+/// Refuses initial data `what` (`"q"`, `"v"` or `"p"`) with a component that is not finite.
+pub(crate) fn check_finite(what: &'static str, x: &[f64]) -> Result<(), Error> {
+    match x.iter().position(|c| !c.is_finite()) {
+        Some(index) => Err(Error::NonFiniteInitialData { what, index }),
+        None => Ok(()),
+    }
+}
+
+/// Refuses a model that depends on time but says it does not (`STRUCTURE.uses_time`
+/// false while `lagrangian_at` or `force_at` change with `t`): its kernels would be
+/// evaluated without time.
+pub(super) fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+) -> Result<(), Error> {
+    if M::STRUCTURE.uses_time {
+        return Ok(());
+    }
+    let (qa, va): ([f64; N], [f64; N]) = ((*q).into(), (*v).into());
+    let l = model.lagrangian::<f64>(&qa, &va);
+    let f = model.force::<f64>(&qa, &va);
+    for t in [0.7390851332151607, -2.5, 1e3] {
+        let same_l = model.lagrangian_at::<f64>(t, &qa, &va).to_bits() == l.to_bits();
+        let ft = model.force_at::<f64>(t, &qa, &va);
+        let same_f = ft.iter().zip(&f).all(|(a, b)| a.to_bits() == b.to_bits());
+        if !(same_l && same_f) {
+            return Err(Error::InvalidModel {
+                message: "lagrangian_at or force_at depends on t, but STRUCTURE.uses_time is false"
+                    .into(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The number of steps of size `h` (the last one shortened) that reach `t_final`.
+///
+/// A ratio within 1e-10 of an integer is that integer, so that `t_final = n·h` does not
+/// end with a sliver of a step; any positive `t_final` takes at least one step.
+pub(crate) fn step_count(t_final: f64, h: f64, max: usize) -> Result<usize, Error> {
+    let ratio = t_final / h;
+    let steps = if (ratio - ratio.round()).abs() <= 1e-10 * ratio.max(1.0) {
+        ratio.round()
+    } else {
+        ratio.ceil()
+    };
+    let steps = if t_final > 0.0 { steps.max(1.0) } else { 0.0 };
+    if steps > max as f64 {
+        return Err(Error::TooManySteps { steps, max });
+    }
+    // Exact: steps ≤ max ≤ usize::MAX, and the float is an integer.
+    Ok(steps as usize)
+}
+
+/// The error for a non-finite value computed from a state of max-norm `size`.
+///
+/// Past `√f64::MAX`, products of two state components overflow: the model is not at
+/// fault, the solution has left the range of `f64` ([`Error::Overflow`]). Below, the model
+/// returned a non-finite value at a representable point ([`Error::NonFiniteModel`]).
+pub(crate) fn non_finite(size: f64, step: usize, t: f64, quantity: &'static str) -> Error {
+    if size >= f64::MAX.sqrt() {
+        Error::Overflow { step, t, quantity }
+    } else {
+        Error::NonFiniteModel { step, t }
+    }
+}
