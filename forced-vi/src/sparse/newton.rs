@@ -7,12 +7,10 @@
 //! factored by faer's sparse LU. Like the dense solver it knows nothing of steps or schemes.
 
 use crate::error::NewtonFailure;
-use crate::newton::{round_off_floor, NewtonOptions, NewtonReport};
+use crate::newton::{
+    error_estimate, round_off_floor, wants_fresh_jacobian, NewtonOptions, NewtonReport,
+};
 use crate::sparse::lu::SparseLu;
-
-/// Simplified Newton refreshes its Jacobian when the contraction rate exceeds this (as the
-/// dense solver does).
-const THETA_REFRESH: f64 = 1e-2;
 
 /// A square nonlinear system `R(z) = 0` whose Jacobian has a fixed sparse pattern.
 pub(crate) trait SparseSystem {
@@ -128,13 +126,7 @@ impl SparseNewton {
             }
             rnorm = trial_norm;
             prev_step = step;
-            let err_estimate = if it == 1 || !theta.is_finite() {
-                step
-            } else if theta < 1.0 {
-                step * theta / (1.0 - theta)
-            } else {
-                f64::INFINITY
-            };
+            let err_estimate = error_estimate(it, step, theta);
             let znorm = max_norm(z);
             let tol = o.rtol * znorm + o.atol;
             let at_floor = it > 1 && rnorm <= round_off_floor(scale, jac_scale, znorm);
@@ -146,8 +138,7 @@ impl SparseNewton {
                     residual_bound: res_tol.max(round_off_floor(scale, jac_scale, znorm)),
                 });
             }
-            if o.simplified && (it == 1 || theta > THETA_REFRESH) && (it > 1 || step > 1e-3 * znorm)
-            {
+            if o.simplified && wants_fresh_jacobian(it, theta, step, znorm) {
                 self.have_factors = false;
             }
         }

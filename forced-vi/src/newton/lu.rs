@@ -1,0 +1,145 @@
+//! Dense LU with partial pivoting: [`DenseLu`] in buffers made once, for the step Jacobian,
+//! and [`solve_small`] on the stack, for `N × N` blocks.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use crate::error::NewtonFailure;
+
+/// LU with partial pivoting, in place in a buffer made once.
+///
+/// nalgebra's `LU` allocates a permutation for each factorisation of a dynamically sized
+/// matrix; the stepper factors a small matrix every iteration, so it keeps its own buffers.
+#[derive(Clone, Debug)]
+pub struct DenseLu {
+    lu: DMatrix<f64>,
+    piv: Vec<usize>,
+    row_scale: Vec<f64>,
+}
+
+impl DenseLu {
+    /// Buffers for `n × n` systems.
+    pub fn new(n: usize) -> Self {
+        DenseLu {
+            lu: DMatrix::zeros(n, n),
+            piv: vec![0; n],
+            row_scale: vec![0.0; n],
+        }
+    }
+
+    /// Factors `a`. Fails if a pivot is zero or negligible against the scale of its own
+    /// row (a scale-invariant test: rows of very different sizes are not singular).
+    pub fn factor(&mut self, a: &DMatrix<f64>) -> Result<(), NewtonFailure> {
+        let n = a.nrows();
+        self.lu.as_mut_slice().copy_from_slice(a.as_slice());
+        let m = self.lu.as_mut_slice(); // column-major: m[i + j * n] is row i, column j
+        if m.iter().any(|x| !x.is_finite()) {
+            return Err(NewtonFailure::NonFinite);
+        }
+        for (i, r) in self.row_scale.iter_mut().enumerate() {
+            *r = (0..n).fold(0.0f64, |s, j| s.max(m[i + j * n].abs()));
+        }
+        for k in 0..n {
+            let col = &m[k * n..(k + 1) * n];
+            let (mut p, mut best) = (k, col[k].abs());
+            for (i, x) in col.iter().enumerate().skip(k + 1) {
+                if x.abs() > best {
+                    best = x.abs();
+                    p = i;
+                }
+            }
+            if best <= self.row_scale[p] * f64::EPSILON * 1e-3 || best == 0.0 {
+                return Err(NewtonFailure::SingularJacobian);
+            }
+            self.piv[k] = p;
+            if p != k {
+                for j in 0..n {
+                    m.swap(k + j * n, p + j * n);
+                }
+                self.row_scale.swap(k, p);
+            }
+            let inv = 1.0 / m[k + k * n];
+            for x in &mut m[k * n + k + 1..(k + 1) * n] {
+                *x *= inv;
+            }
+            for j in k + 1..n {
+                let u = m[k + j * n];
+                if u != 0.0 {
+                    let (left, right) = m.split_at_mut(j * n);
+                    let lcol = &left[k * n + k + 1..(k + 1) * n];
+                    for (x, l) in right[k + 1..n].iter_mut().zip(lcol) {
+                        *x -= l * u;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Solves `A x = b` in place with the last factors.
+    pub fn solve_in_place(&self, b: &mut DVector<f64>) {
+        let n = self.piv.len();
+        let m = self.lu.as_slice();
+        let x = b.as_mut_slice();
+        for (k, &p) in self.piv.iter().enumerate() {
+            x.swap(k, p);
+        }
+        for j in 0..n {
+            let xj = x[j];
+            if xj != 0.0 {
+                for (xi, l) in x[j + 1..n].iter_mut().zip(&m[j * n + j + 1..(j + 1) * n]) {
+                    *xi -= l * xj;
+                }
+            }
+        }
+        for j in (0..n).rev() {
+            x[j] /= m[j + j * n];
+            let xj = x[j];
+            if xj != 0.0 {
+                for (xi, u) in x[..j].iter_mut().zip(&m[j * n..j * n + j]) {
+                    *xi -= u * xj;
+                }
+            }
+        }
+    }
+}
+
+/// Solves `a x = b` for a small static matrix by LU with partial pivoting, on the stack.
+///
+/// Returns `x` and a reciprocal condition estimate (smallest over largest pivot), or `None`
+/// if a pivot is exactly zero or a value is not finite. nalgebra's own LU needs typenum
+/// bounds that a generic `const N` cannot meet.
+pub fn solve_small<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    b: &SVector<f64, N>,
+) -> Option<(SVector<f64, N>, f64)> {
+    let (mut a, mut x) = (*a, *b);
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for k in 0..N {
+        let p = (k..N).max_by(|&i, &j| a[(i, k)].abs().total_cmp(&a[(j, k)].abs()))?;
+        let piv = a[(p, k)];
+        if piv == 0.0 || !piv.is_finite() {
+            return None;
+        }
+        lo = lo.min(piv.abs());
+        hi = hi.max(piv.abs());
+        a.swap_rows(k, p);
+        x.swap_rows(k, p);
+        for i in k + 1..N {
+            let l = a[(i, k)] / piv;
+            for j in k..N {
+                let u = a[(k, j)];
+                a[(i, j)] -= l * u;
+            }
+            let xk = x[k];
+            x[i] -= l * xk;
+        }
+    }
+    for i in (0..N).rev() {
+        let mut s = x[i];
+        for j in i + 1..N {
+            s -= a[(i, j)] * x[j];
+        }
+        x[i] = s / a[(i, i)];
+    }
+    Some((x, if N == 0 { 1.0 } else { lo / hi }))
+}

@@ -1,0 +1,88 @@
+//! The options of the Newton solver and their checks.
+
+/// Options of the Newton solver. `Default` gives the values listed per field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct NewtonOptions {
+    /// Cap on iterations per solve (default 12).
+    pub max_iterations: usize,
+    /// Relative tolerance on the estimated error of `z` (default 1e-12).
+    pub rtol: f64,
+    /// Absolute tolerance on the estimated error of `z` (default 1e-15).
+    pub atol: f64,
+    /// Tolerance on the residual, relative to the caller's residual scale (default 1e-9).
+    pub residual_tol: f64,
+    /// Halvings allowed in the line search before declaring stagnation (default 10).
+    pub max_backtracks: usize,
+    /// Reuse the Jacobian's LU factors across the iterations of one solve (simplified
+    /// Newton) (default true). The factors are kept only while the contraction rate stays
+    /// below 1e-2, so the accepted iterate is as exact as full Newton's; the round-off-level
+    /// error floors depend on that.
+    pub simplified: bool,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        NewtonOptions {
+            max_iterations: 12,
+            rtol: 1e-12,
+            atol: 1e-15,
+            residual_tol: 1e-9,
+            max_backtracks: 10,
+            simplified: true,
+        }
+    }
+}
+
+impl NewtonOptions {
+    /// Sets the iteration cap.
+    #[must_use]
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.max_iterations = n;
+        self
+    }
+    /// Sets the relative and absolute tolerances on the solution.
+    #[must_use]
+    pub fn tolerances(mut self, rtol: f64, atol: f64) -> Self {
+        self.rtol = rtol;
+        self.atol = atol;
+        self
+    }
+    /// Sets the residual tolerance (relative to the momentum scale).
+    #[must_use]
+    pub fn residual_tol(mut self, tol: f64) -> Self {
+        self.residual_tol = tol;
+        self
+    }
+    /// Turns simplified Newton (reused LU factors) on or off.
+    #[must_use]
+    pub fn simplified(mut self, on: bool) -> Self {
+        self.simplified = on;
+        self
+    }
+}
+
+impl NewtonOptions {
+    /// Checks the options: tolerances finite and non-negative (the residual tolerance
+    /// positive), at least one and at most 10 000 iterations, at most 64 halvings. The `Err`
+    /// names the offending field and its value.
+    pub fn validate(&self) -> Result<(), (&'static str, f64)> {
+        let nonneg = |x: f64| x.is_finite() && x >= 0.0;
+        if !nonneg(self.rtol) {
+            return Err(("rtol", self.rtol));
+        }
+        if !nonneg(self.atol) {
+            return Err(("atol", self.atol));
+        }
+        if !(self.residual_tol.is_finite() && self.residual_tol > 0.0) {
+            return Err(("residual_tol", self.residual_tol));
+        }
+        if !(1..=10_000).contains(&self.max_iterations) {
+            return Err(("max_iterations", self.max_iterations as f64));
+        }
+        if self.max_backtracks > 64 {
+            return Err(("max_backtracks", self.max_backtracks as f64));
+        }
+        Ok(())
+    }
+}

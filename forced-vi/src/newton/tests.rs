@@ -1,0 +1,157 @@
+//! Unit tests of the Newton solver and the dense LU.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::*;
+
+struct Cubic;
+impl NonlinearSystem for Cubic {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        r[0] = z[0] * z[0] * z[0] - 2.0 * z[0] - 5.0 + z[1];
+        r[1] = z[1] - 0.1 * z[0];
+        Ok(())
+    }
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        j[(0, 0)] = 3.0 * z[0] * z[0] - 2.0;
+        j[(0, 1)] = 1.0;
+        j[(1, 0)] = -0.1;
+        j[(1, 1)] = 1.0;
+        Ok(())
+    }
+}
+
+#[test]
+fn converges_quadratically_and_checks_both_tests() {
+    let mut n = Newton::new(2, NewtonOptions::default().simplified(false));
+    let mut z = DVector::from_vec(vec![2.0, 0.0]);
+    let rep = n.solve(&mut Cubic, &mut z, 1.0).unwrap();
+    assert!(rep.iterations <= 6, "{rep:?}");
+    // Simplified Newton converges too, linearly, refreshing its factors when slow.
+    let mut n = Newton::new(2, NewtonOptions::default());
+    let mut z2 = DVector::from_vec(vec![2.0, 0.0]);
+    let rep = n.solve(&mut Cubic, &mut z2, 1.0).unwrap();
+    assert!(rep.iterations <= 12, "{rep:?}");
+    // Within the requested tolerance, rtol · |z| ≈ 2e-12.
+    assert!((&z2 - &z).amax() < 5e-12, "{}", (&z2 - &z).amax());
+    let mut r = DVector::zeros(2);
+    Cubic.residual(&z, &mut r).unwrap();
+    assert!(r.amax() < 1e-13);
+}
+
+#[test]
+fn lu_solves_and_detects_singularity() {
+    let a = DMatrix::from_row_slice(3, 3, &[0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0]);
+    let mut lu = DenseLu::new(3);
+    lu.factor(&a).unwrap();
+    let x = DVector::from_vec(vec![1.0, -2.0, 0.5]);
+    let mut b = &a * &x;
+    lu.solve_in_place(&mut b);
+    assert!((b - x).amax() < 1e-14);
+    let s = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]);
+    assert_eq!(lu_err(&s), Some(NewtonFailure::SingularJacobian));
+}
+
+/// `R(z) = A z − b + c · z³` (componentwise cube), for linear (`c = 0`) and nonlinear
+/// systems.
+struct Poly {
+    a: DMatrix<f64>,
+    b: DVector<f64>,
+    c: f64,
+}
+impl NonlinearSystem for Poly {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        r.copy_from(&(&self.a * z - &self.b + z.map(|x| self.c * x * x * x)));
+        Ok(())
+    }
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        j.copy_from(&self.a);
+        for i in 0..z.len() {
+            j[(i, i)] += 3.0 * self.c * z[i] * z[i];
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn trust_newton_huge_guess_is_not_accepted_early() {
+    // The reproducer: the floor used to come from |J|·|z| of the 1e30 guess.
+    let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.999, 0.999, 1.0]);
+    let b = DVector::from_vec(vec![1.0, 2.0]);
+    let exact = a.clone().lu().solve(&b).unwrap();
+    let mut sys = Poly { a, b, c: 0.0 };
+    for simplified in [true, false] {
+        let mut n = Newton::new(2, NewtonOptions::default().simplified(simplified));
+        let mut z = DVector::from_vec(vec![1e30, -1e30]);
+        match n.solve(&mut sys, &mut z, 1.0) {
+            Ok(rep) => {
+                assert!((&z - &exact).amax() < 1e-9, "{rep:?} {z}");
+                assert!(rep.residual <= rep.residual_bound, "{rep:?}");
+            }
+            Err(e) => panic!("a linear system converges: {e}"),
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+    /// Whatever the guess, `solve` meets its stated bound or returns an error; for a
+    /// linear system, the error in `z` is then within `|A⁻¹| · bound`.
+    #[test]
+    fn trust_newton_meets_its_stated_bound_or_fails(
+        n in 1usize..6,
+        entries in proptest::collection::vec(-1.0f64..1.0, 36),
+        rhs in proptest::collection::vec(-1e3f64..1e3, 6),
+        guess in proptest::collection::vec(-1.0f64..1.0, 6),
+        guess_exp in -3i32..=30,
+        cubic in proptest::prop_oneof![proptest::strategy::Just(0.0), -1.0f64..1.0],
+        simplified in proptest::bool::ANY,
+        scale_exp in -3i32..6,
+    ) {
+        let mut a = DMatrix::from_fn(n, n, |i, j| entries[i * 6 + j]);
+        for i in 0..n {
+            a[(i, i)] += 2.0 * a.row(i).abs().sum().max(0.5) * if i % 2 == 0 { 1.0 } else { -1.0 };
+        }
+        let b = DVector::from_fn(n, |i, _| rhs[i]);
+        let mut z = DVector::from_fn(n, |i, _| guess[i] * 10f64.powi(guess_exp));
+        let c = if cubic != 0.0 { cubic * a.abs().max() } else { 0.0 };
+        let mut sys = Poly { a: a.clone(), b: b.clone(), c };
+        let scale = 10f64.powi(scale_exp);
+        let mut solver = Newton::new(n, NewtonOptions::default().simplified(simplified));
+        if let Ok(rep) = solver.solve(&mut sys, &mut z, scale) {
+            let mut r = DVector::zeros(n);
+            sys.residual(&z, &mut r).unwrap();
+            let rn = r.amax();
+            proptest::prop_assert!(rn <= rep.residual_bound * (1.0 + 1e-12), "{rn} > {rep:?}");
+            // The bound is the stated one, from the accepted iterate.
+            let mut j = DMatrix::zeros(n, n);
+            sys.jacobian(&z, &mut j).unwrap();
+            let stated = (1e-9 * scale)
+                .max(round_off_floor(scale, j.amax(), z.amax()));
+            proptest::prop_assert!(rep.residual_bound <= 4.0 * stated, "{rep:?} vs {stated}");
+            if c == 0.0 {
+                let inv = a.clone().try_inverse().unwrap();
+                let exact = &inv * &b;
+                let bound = inv.abs().row_sum().max() * rep.residual_bound;
+                proptest::prop_assert!(
+                    (&z - &exact).amax() <= 1.01 * bound + 1e-13 * exact.amax(),
+                    "error {} > {bound}", (&z - &exact).amax()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn options_are_validated() {
+    let o = NewtonOptions::default();
+    assert!(o.validate().is_ok());
+    assert_eq!(o.tolerances(-1.0, 0.0).validate(), Err(("rtol", -1.0)));
+    assert!(o.tolerances(1e-12, f64::NAN).validate().is_err());
+    assert!(o.residual_tol(0.0).validate().is_err());
+    assert!(o.max_iterations(0).validate().is_err());
+    assert!(o.max_iterations(usize::MAX).validate().is_err());
+}
+
+fn lu_err(a: &DMatrix<f64>) -> Option<NewtonFailure> {
+    DenseLu::new(a.nrows()).factor(a).err()
+}
