@@ -1,0 +1,255 @@
+//! Discretisations as data: every scheme is a coefficient set `(d, c, b)` (DESIGN §3).
+//!
+//! The path over one step is the polynomial through control points at the nodes `d`
+//! (`d₀ = 0`, `d_{s−1} = 1`); the action is approximated by the quadrature `(c, b)` on
+//! `[0, 1]`. All schemes share one residual and Jacobian assembly in [`crate::integrator`].
+//!
+//! | piece | module |
+//! |---|---|
+//! | [`Scheme`]: the coefficients, `Φ`, `Ψ` and the Jacobian terms; [`JacobianTerm`] | this one |
+//! | [`SchemeId`], its names and their parsing | `id` |
+//! | the Lagrange basis on the control points; Lobatto nodes and weights | `coefficients` |
+
+#[cfg(test)]
+mod accuracy;
+mod coefficients;
+mod id;
+#[cfg(test)]
+mod tests;
+
+pub use coefficients::lobatto_nodes_weights;
+use coefficients::{lagrange, lagrange_derivative};
+pub use id::SchemeId;
+
+use crate::error::SchemeError;
+
+/// The most control points a Lobatto scheme may have (order `2 · 32 − 2 = 62`).
+///
+/// Measured (`scheme::accuracy` tests against the 60-digit values of
+/// `scripts/lobatto_limits.py`): the nodes and weights stay within 1.1e-16 and 1.7e-14
+/// (relative) of exact up to s = 48, and within 7.6e-15 up to 32; a damped oscillator run
+/// with s = 32 is accurate to round-off. The bound keeps the step system, `(s − 1)·n`
+/// unknowns with an `O((s n)³)` factorisation, and the set-up cost of a scheme small; no
+/// `f64` computation gains from more than about 10 stages.
+pub const MAX_STAGES: usize = 32;
+
+/// Largest Lebesgue constant `max_j Σ_m |ℓ_m(1 + d_j)|` for which the predictor
+/// extrapolates the previous step's polynomial. It grows like 5.8^s (589 at s = 5, 6.9e5 at
+/// s = 9, 4.4e32 at s = 44; `forced-vi/data/lobatto_predictor.csv`); it multiplies the round-off of the
+/// previous step, so beyond this the predictor is a straight line along the velocity.
+const MAX_PREDICTOR_LEBESGUE: f64 = 1e6;
+
+fn check_stages(s: usize) -> Result<usize, SchemeError> {
+    if s < 2 {
+        Err(SchemeError::TooFewStages(s))
+    } else if s > MAX_STAGES {
+        Err(SchemeError::TooManyStages {
+            requested: s,
+            max: MAX_STAGES,
+        })
+    } else {
+        Ok(s)
+    }
+}
+
+/// A scheme's coefficients and the matrices derived from them.
+#[derive(Clone, Debug)]
+pub struct Scheme {
+    id: SchemeId,
+    d: Vec<f64>,
+    c: Vec<f64>,
+    b: Vec<f64>,
+    /// `Φ_ij = ℓ_j(c_i)`, row-major `r × s`.
+    phi: Vec<f64>,
+    /// `Ψ_ij = ℓ_j'(c_i)`, row-major `r × s`.
+    psi: Vec<f64>,
+    /// The non-zero terms of the Jacobian chain rule, see [`JacobianTerm`].
+    terms: Vec<JacobianTerm>,
+    /// `ℓ_m(1 + d_j)`, row-major `s × s`: the previous step's polynomial extrapolated to
+    /// this step's control points (the predictor for equal steps).
+    extrapolation: Vec<f64>,
+    /// `ℓ_m'(1)`: the polynomial's slope at the end of the step.
+    end_slope: Vec<f64>,
+    /// Whether the predictor may extrapolate (see [`MAX_PREDICTOR_LEBESGUE`]).
+    extrapolates: bool,
+}
+
+/// One term of `∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i
+/// + Ψ_ij Ψ_im E_i / h]` for a residual row `j < s − 1` and an unknown `m ≥ 1`, with the
+/// factors of `h` left out. Terms whose four coefficients vanish (most of them for Lobatto,
+/// where `Φ = I`) are not stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JacobianTerm {
+    /// Quadrature node.
+    pub i: usize,
+    /// Residual block row.
+    pub j: usize,
+    /// Unknown block column (`m ≥ 1`).
+    pub m: usize,
+    /// `b_i Φ_ij Φ_im` (times `h`) on `A`.
+    pub a: f64,
+    /// `b_i Φ_ij Ψ_im` on `B`.
+    pub b: f64,
+    /// `b_i Ψ_ij Φ_im` on `C`.
+    pub c: f64,
+    /// `b_i Ψ_ij Ψ_im` (over `h`) on `E`.
+    pub e: f64,
+}
+
+impl Scheme {
+    /// Builds the scheme named by `id`.
+    pub fn new(id: SchemeId) -> Result<Self, SchemeError> {
+        let (d, c, b) = match id {
+            SchemeId::Midpoint => (vec![0.0, 1.0], vec![0.5], vec![1.0]),
+            SchemeId::Trapezoid => (vec![0.0, 1.0], vec![0.0, 1.0], vec![0.5, 0.5]),
+            SchemeId::Alpha(a) => {
+                if !(a.is_finite() && (0.0..=1.0).contains(&a)) {
+                    return Err(SchemeError::AlphaOutOfRange(a));
+                }
+                (vec![0.0, 1.0], vec![a], vec![1.0])
+            }
+            SchemeId::Lobatto(s) => {
+                check_stages(s)?;
+                let (x, w) = lobatto_nodes_weights(s);
+                (x.clone(), x, w)
+            }
+        };
+        Ok(Self::from_coefficients(id, d, c, b))
+    }
+
+    /// The `s`-stage Lobatto Galerkin scheme (order `2s − 2`).
+    pub fn lobatto(s: usize) -> Result<Self, SchemeError> {
+        Self::new(SchemeId::Lobatto(s))
+    }
+
+    /// The midpoint rule.
+    pub fn midpoint() -> Self {
+        Self::from_coefficients(SchemeId::Midpoint, vec![0.0, 1.0], vec![0.5], vec![1.0])
+    }
+
+    fn from_coefficients(id: SchemeId, d: Vec<f64>, c: Vec<f64>, b: Vec<f64>) -> Self {
+        let s = d.len();
+        let mut phi = vec![0.0; c.len() * s];
+        let mut psi = vec![0.0; c.len() * s];
+        for (i, &ci) in c.iter().enumerate() {
+            for j in 0..s {
+                phi[i * s + j] = lagrange(&d, j, ci);
+                psi[i * s + j] = lagrange_derivative(&d, j, ci);
+            }
+        }
+        let mut terms = Vec::new();
+        for (i, &bi) in b.iter().enumerate() {
+            for j in 0..s - 1 {
+                for m in 1..s {
+                    let (phj, psj) = (phi[i * s + j], psi[i * s + j]);
+                    let (phm, psm) = (phi[i * s + m], psi[i * s + m]);
+                    let t = JacobianTerm {
+                        i,
+                        j,
+                        m,
+                        a: bi * phj * phm,
+                        b: bi * phj * psm,
+                        c: bi * psj * phm,
+                        e: bi * psj * psm,
+                    };
+                    if t.a != 0.0 || t.b != 0.0 || t.c != 0.0 || t.e != 0.0 {
+                        terms.push(t);
+                    }
+                }
+            }
+        }
+        let extrapolation: Vec<f64> = (0..s * s)
+            .map(|k| lagrange(&d, k % s, 1.0 + d[k / s]))
+            .collect();
+        let lebesgue = extrapolation
+            .chunks(s)
+            .map(|row| row.iter().map(|x| x.abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        let end_slope = (0..s).map(|m| lagrange_derivative(&d, m, 1.0)).collect();
+        Scheme {
+            id,
+            d,
+            c,
+            b,
+            phi,
+            psi,
+            terms,
+            extrapolation,
+            end_slope,
+            extrapolates: lebesgue <= MAX_PREDICTOR_LEBESGUE,
+        }
+    }
+
+    /// The scheme's id.
+    pub fn id(&self) -> SchemeId {
+        self.id
+    }
+    /// Number of control points `s` (including both ends of the step).
+    pub fn stages(&self) -> usize {
+        self.d.len()
+    }
+    /// Number of quadrature nodes `r`.
+    pub fn quadrature_nodes(&self) -> usize {
+        self.c.len()
+    }
+    /// Control-point positions `d` on `[0, 1]`.
+    pub fn d(&self) -> &[f64] {
+        &self.d
+    }
+    /// Quadrature nodes `c` on `[0, 1]`.
+    pub fn c(&self) -> &[f64] {
+        &self.c
+    }
+    /// Quadrature weights `b`.
+    pub fn b(&self) -> &[f64] {
+        &self.b
+    }
+    /// `Φ_ij = ℓ_j(c_i)`.
+    #[inline]
+    pub fn phi(&self, i: usize, j: usize) -> f64 {
+        self.phi[i * self.d.len() + j]
+    }
+    /// `Ψ_ij = ℓ_j'(c_i)`.
+    #[inline]
+    pub fn psi(&self, i: usize, j: usize) -> f64 {
+        self.psi[i * self.d.len() + j]
+    }
+    /// The non-zero terms of the Jacobian chain rule.
+    pub fn jacobian_terms(&self) -> &[JacobianTerm] {
+        &self.terms
+    }
+
+    /// The classical order of the scheme.
+    pub fn order(&self) -> usize {
+        match self.id {
+            SchemeId::Midpoint | SchemeId::Trapezoid => 2,
+            SchemeId::Alpha(0.5) => 2,
+            SchemeId::Alpha(_) => 1,
+            SchemeId::Lobatto(s) => 2 * s - 2,
+        }
+    }
+
+    /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
+    #[inline]
+    pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {
+        self.extrapolation[j * self.d.len() + m]
+    }
+
+    /// Whether the predictor extrapolates the previous step's polynomial (false for
+    /// Lobatto schemes with more than 9 stages, whose extrapolation amplifies round-off).
+    #[inline]
+    pub(crate) fn extrapolates(&self) -> bool {
+        self.extrapolates
+    }
+
+    /// `ℓ_m'(1)`.
+    #[inline]
+    pub(crate) fn end_slope(&self, m: usize) -> f64 {
+        self.end_slope[m]
+    }
+
+    /// Evaluates the Lagrange basis on the control points at `tau` (in units of the step).
+    pub(crate) fn basis_at(&self, tau: f64, j: usize) -> f64 {
+        lagrange(&self.d, j, tau)
+    }
+}

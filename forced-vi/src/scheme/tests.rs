@@ -1,0 +1,115 @@
+//! Unit tests of the schemes: Lobatto values, quadrature exactness, the basis, the ids.
+
+use super::*;
+
+fn close(a: &[f64], b: &[f64], tol: f64) {
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(b) {
+        assert!((x - y).abs() <= tol, "{a:?} vs {b:?}");
+    }
+}
+
+#[test]
+fn lobatto_known_values() {
+    let (x, w) = lobatto_nodes_weights(2);
+    close(&x, &[0.0, 1.0], 0.0);
+    close(&w, &[0.5, 0.5], 1e-16);
+    let (x, w) = lobatto_nodes_weights(3);
+    close(&x, &[0.0, 0.5, 1.0], 0.0);
+    close(&w, &[1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0], 2e-16);
+    let r5 = 1.0 / 5f64.sqrt();
+    let (x, w) = lobatto_nodes_weights(4);
+    close(&x, &[0.0, 0.5 * (1.0 - r5), 0.5 * (1.0 + r5), 1.0], 2e-16);
+    close(&w, &[1.0 / 12.0, 5.0 / 12.0, 5.0 / 12.0, 1.0 / 12.0], 2e-16);
+    let r37 = (3.0f64 / 7.0).sqrt();
+    let (x, w) = lobatto_nodes_weights(5);
+    close(
+        &x,
+        &[0.0, 0.5 * (1.0 - r37), 0.5, 0.5 * (1.0 + r37), 1.0],
+        2e-16,
+    );
+    close(
+        &w,
+        &[
+            1.0 / 20.0,
+            49.0 / 180.0,
+            16.0 / 45.0,
+            49.0 / 180.0,
+            1.0 / 20.0,
+        ],
+        2e-16,
+    );
+}
+
+#[test]
+fn lobatto_quadrature_is_exact_to_degree_2s_minus_3() {
+    for s in 2..=9 {
+        let (x, w) = lobatto_nodes_weights(s);
+        for deg in 0..=(2 * s - 3) {
+            let q: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(deg as i32)).sum();
+            let exact = 1.0 / (deg as f64 + 1.0);
+            assert!((q - exact).abs() < 4e-15, "s={s} deg={deg}: {q} vs {exact}");
+        }
+    }
+}
+
+#[test]
+fn basis_derivative_rows_sum_to_zero() {
+    for s in 2..=6 {
+        let sch = Scheme::lobatto(s).unwrap();
+        for i in 0..sch.quadrature_nodes() {
+            let sp: f64 = (0..s).map(|j| sch.psi(i, j)).sum();
+            let sf: f64 = (0..s).map(|j| sch.phi(i, j)).sum();
+            assert!(sp.abs() < 1e-12 && (sf - 1.0).abs() < 1e-14);
+        }
+    }
+}
+
+#[test]
+fn ids_round_trip() {
+    for t in [
+        "midpoint",
+        "trapezoid",
+        "alpha(0.3)",
+        "lobatto2",
+        "lobatto5",
+        "lobatto7",
+    ] {
+        let id: SchemeId = t.parse().unwrap();
+        assert_eq!(id.to_string(), t);
+        Scheme::new(id).unwrap();
+    }
+    assert!("lobatto1".parse::<SchemeId>().is_err());
+    for bad in [
+        "lobatto+3",
+        "lobatto007",
+        "lobatto 3",
+        "lobatto",
+        "lobatto-2",
+        "lobatto3.0",
+    ] {
+        assert_eq!(
+            bad.parse::<SchemeId>(),
+            Err(SchemeError::Unknown(bad.to_string())),
+            "{bad}"
+        );
+    }
+    for big in [
+        "lobatto33",
+        "lobatto18446744073709551615",
+        "lobatto99999999999999999999999",
+    ] {
+        assert!(matches!(
+            big.parse::<SchemeId>(),
+            Err(SchemeError::TooManyStages {
+                max: MAX_STAGES,
+                ..
+            })
+        ));
+    }
+    assert!(Scheme::lobatto(usize::MAX).is_err());
+    assert!(Scheme::lobatto(1 << 40).is_err());
+    assert!(Scheme::lobatto(MAX_STAGES).is_ok());
+    assert!("alpha(1.5)".parse::<SchemeId>().is_err());
+    assert!("rk4".parse::<SchemeId>().is_err());
+}
