@@ -1,0 +1,35 @@
+//! Paths and helpers for code written by `#[forced_lagrangian]`. Not a public API.
+//!
+//! Generated code reaches the runtime only through `::forced_vi::__private`, so a user crate
+//! needs no direct num-dual or nalgebra dependency. The helpers are the dual-number
+//! building blocks of the specialised node kernels: each differentiates one term of the
+//! Lagrangian (or one force component) over only the variables that the term uses.
+//!
+//! Variables are numbered by *slot*: slot `s < N` is `q[s]`, slot `s ≥ N` is `v[s − N]`.
+//!
+//! Every helper is re-exported here, at the path generated code names:
+//!
+//! | piece | module |
+//! |---|---|
+//! | indexing and integer arithmetic of model code that never panics | `int` |
+//! | the dense node kernels: term gradients and Hessians, force rows and Jacobians | `dense` |
+//! | per-term kernels of split models (sparse kernels, DESIGN §9): slots, `Accum` | `terms` |
+
+mod dense;
+mod int;
+mod terms;
+
+pub use nalgebra;
+pub use num_dual;
+
+pub use crate::doubled;
+pub use crate::model::{general, ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
+pub use crate::scalar::{lift, Scalar};
+pub use core::primitive::f64;
+pub use nalgebra::{SMatrix, SVector};
+
+pub use crate::sparse::{Block, NodeSink, SparseNode};
+
+pub use dense::*;
+pub use int::*;
+pub use terms::*;
