@@ -2,13 +2,13 @@
 //!
 //! Without a subcommand it runs the work-precision report and writes `report/`. Commands
 //! share the options `--out`, `--quick`, `--scene` and `--method`, and each adds its own
-//! section to `report/README.md` (see `forced_vi_scenes::report`). A new command is a new
-//! variant of [`Command`] plus a match arm in `main`.
+//! section to `report/README.md`. The commands are `forced_vi_scenes::report::COMMANDS`: a
+//! new command is added there, not here.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, FromArgMatches};
 use forced_vi_scenes::report::{self, Method, Options};
 use forced_vi_scenes::scenes;
 
@@ -17,20 +17,6 @@ mod alloc_count;
 /// Counts heap allocations for `step-cost` (allocations per step).
 #[global_allocator]
 static ALLOC: alloc_count::Counting = alloc_count::Counting;
-
-/// Work-precision report for the forced variational integrators.
-///
-/// Runs every scene with the variational schemes (over step sizes) and with the baseline
-/// ODE solvers (over tolerances), and writes CSV files, SVG plots and README.md into the
-/// output folder.
-#[derive(Debug, Parser)]
-#[command(name = "forced-vi-report", version, about, long_about)]
-struct Cli {
-    #[command(subcommand)]
-    command: Option<Command>,
-    #[command(flatten)]
-    common: CommonArgs,
-}
 
 /// Options every command understands.
 #[derive(Debug, Args)]
@@ -53,17 +39,22 @@ struct CommonArgs {
     no_progress: bool,
 }
 
-#[derive(Debug, Subcommand)]
-enum Command {
-    /// The work-precision report (what runs when no command is given).
-    WorkPrecision,
-    /// List the scenes and the default methods.
-    List,
-    /// Stiff and extreme cases: writes stability.csv and the stability section.
-    Stability,
-    /// Per-step cost: generated against hand-written kernels, chain scaling, allocations,
-    /// compile time and peak RSS (writes step_cost.csv and its section).
-    StepCost,
+/// The command line: the options of [`CommonArgs`], `list`, and one subcommand per entry of
+/// [`report::COMMANDS`].
+fn cli() -> clap::Command {
+    let root = CommonArgs::augment_args(clap::Command::new("forced-vi-report"))
+        .version(env!("CARGO_PKG_VERSION"))
+        .about("Work-precision report for the forced variational integrators.")
+        .long_about(
+            "Work-precision report for the forced variational integrators.\n\n\
+             Runs every scene with the variational schemes (over step sizes) and with the \
+             baseline ODE solvers (over tolerances), and writes CSV files, SVG plots and \
+             README.md into the output folder.",
+        )
+        .subcommand(clap::Command::new("list").about("List the scenes and the default methods."));
+    report::COMMANDS.iter().fold(root, |cli, c| {
+        cli.subcommand(clap::Command::new(c.name).about(c.about))
+    })
 }
 
 fn options(common: &CommonArgs) -> Result<Options, report::ReportError> {
@@ -99,59 +90,24 @@ fn list() -> Result<(), report::ReportError> {
     Ok(())
 }
 
-fn work_precision(common: &CommonArgs) -> Result<(), report::ReportError> {
-    let opts = options(common)?;
-    let summary = report::work_precision::run(&opts)?;
-    if opts.scenes.is_empty() || opts.scenes.iter().any(|s| s == "driven_duffing") {
-        let points = report::poincare::run(&opts)?;
-        println!("Poincaré section: {points} points");
-        report::readme::assemble(&opts.out)?;
-    }
-    println!(
-        "wrote {} ({} runs, {} failed) in {:.1} s",
-        opts.out.join("README.md").display(),
-        summary.rows.len(),
-        summary.failures.len(),
-        summary.elapsed
-    );
-    Ok(())
-}
-
-fn step_cost(common: &CommonArgs) -> Result<(), report::ReportError> {
-    let opts = options(common)?;
-    let summary = report::step_cost::run(&opts, Some(alloc_count::allocations))?;
-    println!(
-        "wrote {} ({} rows) in {:.1} s",
-        opts.out.join("step_cost.csv").display(),
-        summary.rows.len(),
-        summary.elapsed
-    );
-    Ok(())
-}
-
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match cli.command {
-        None | Some(Command::WorkPrecision) => work_precision(&cli.common),
-        Some(Command::List) => list(),
-        Some(Command::Stability) => options(&cli.common)
-            .and_then(|o| report::stability::run(&o).map(|s| (o, s)))
-            .map(|(o, s)| {
-                let done = s
-                    .rows
-                    .iter()
-                    .filter(|r| !r.outcome.to_string().starts_with("failed"))
-                    .count();
-                println!(
-                    "wrote {} ({} runs, {} finished) in {:.1} s",
-                    o.out.join("stability.csv").display(),
-                    s.rows.len(),
-                    done,
-                    s.elapsed
-                );
-            }),
-        Some(Command::StepCost) => step_cost(&cli.common),
-    };
+    let matches = cli().get_matches();
+    let result = CommonArgs::from_arg_matches(&matches)
+        .map_err(|e| e.exit())
+        .and_then(|common| match matches.subcommand_name() {
+            Some("list") => list(),
+            name => {
+                let command = name
+                    .and_then(report::command::find)
+                    .unwrap_or(&report::COMMANDS[0]);
+                let hooks = report::Hooks {
+                    allocations: Some(alloc_count::allocations),
+                };
+                options(&common)
+                    .and_then(|opts| (command.run)(&opts, &hooks))
+                    .map(|line| println!("{line}"))
+            }
+        });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

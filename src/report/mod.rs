@@ -13,17 +13,18 @@
 //!   *.svg                  plots, embedded in README.md
 //! ```
 //!
-//! # Sections: how several commands share one README
+//! # Commands, and how they share one README
 //!
-//! Each command of the `forced-vi-report` binary (the default work-precision report, and later
-//! `stability`, `step-cost`, ...) writes its own files plus one Markdown section with
-//! [`readme::write_section`], which stores it as `sections/<name>.md` and regenerates
-//! `README.md` by concatenating a fixed header and every section file present, in the order of
-//! [`readme::SECTION_ORDER`] (unknown names follow in alphabetical order). A command
-//! therefore replaces only its own section and never has to read or merge the others. To add
-//! a command: pick a section name, add it to [`readme::SECTION_ORDER`], and call
-//! [`readme::write_section`] at the end of the command. Section files start with a `## `
-//! heading; they may link to files in the report folder by their bare names.
+//! Each command of the `forced-vi-report` binary is a [`Command`] (name, help line, README
+//! sections, run function) defined in its own module and listed once in [`COMMANDS`]; the
+//! binary's command line and the section order of `README.md` both come from that list. A
+//! command writes its own files plus its Markdown sections with [`readme::write_section`],
+//! which stores each as `sections/<name>.md` and regenerates `README.md` by concatenating a
+//! fixed header and every section file present, in the order of [`COMMANDS`] (unknown names
+//! follow in alphabetical order). A command therefore replaces only its own sections and never
+//! has to read or merge the others. To add a command: a module with its `COMMAND` constant,
+//! and one line in [`COMMANDS`]. Section files start with a `## ` heading; they may link to
+//! files in the report folder by their bare names.
 //!
 //! # Studies and their shared parts
 //!
@@ -43,6 +44,7 @@
 //! for how observed orders are fitted and [`work_precision`] for what is measured and timed.
 
 pub mod chart;
+pub mod command;
 pub mod orders;
 pub mod plan;
 pub mod poincare;
@@ -61,8 +63,18 @@ use std::str::FromStr;
 
 use forced_vi::{Scheme, SchemeId};
 
+pub use command::{Command, Hooks};
+
 use crate::baselines::Baseline;
 use crate::scenes::SceneError;
+
+/// Every command of `forced-vi-report`, in README order; the first is what runs without a
+/// command. A new command adds its module's `COMMAND` here (see [`command`]).
+pub const COMMANDS: &[Command] = &[
+    work_precision::COMMAND,
+    stability::COMMAND,
+    step_cost::COMMAND,
+];
 
 /// A method the report can run: a variational scheme or a baseline solver.
 #[derive(Clone, Copy, Debug, PartialEq)]

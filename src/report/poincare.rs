@@ -18,6 +18,9 @@ use crate::scenes::SceneError;
 
 /// The section name (`sections/poincare.md`).
 pub const SECTION: &str = "poincare";
+/// The scene whose Poincaré section this draws; the work-precision command draws it when the
+/// scene is selected.
+pub const SCENE: &str = "driven_duffing";
 
 /// Steps per driving period (lobatto3: order 4).
 const STEPS_PER_PERIOD: f64 = 100.0;

@@ -2,17 +2,15 @@
 //!
 //! A command calls [`write_section`] with its section name and Markdown. The text is stored as
 //! `<out>/sections/<name>.md`, and `README.md` is rebuilt from the fixed [`HEADER`] followed by
-//! every section file present: first those named in [`SECTION_ORDER`], in that order, then any
-//! others alphabetically. Commands never read or merge each other's sections, so running one
+//! every section file present: first those the commands write, in the order of
+//! [`COMMANDS`](super::COMMANDS) (see [`section_order`]), then any others alphabetically. Commands never read or merge each other's sections, so running one
 //! command again replaces only its own section.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use super::command::section_order;
 use super::ReportError;
-
-/// The section order of `README.md`. A new command adds its section name here.
-pub const SECTION_ORDER: &[&str] = &["work_precision", "poincare", "stability", "step_cost"];
 
 /// The fixed top of `README.md`.
 pub const HEADER: &str = "# forced-vi report
@@ -67,10 +65,7 @@ pub fn assemble(out: &Path) -> Result<(), ReportError> {
         Err(e) => return Err(ReportError::io(&dir)(e)),
     };
     names.sort_by_key(|n| {
-        let rank = SECTION_ORDER
-            .iter()
-            .position(|s| s == n)
-            .unwrap_or(SECTION_ORDER.len());
+        let rank = section_order().position(|s| s == n).unwrap_or(usize::MAX);
         (rank, n.clone())
     });
     let mut readme = HEADER.to_string();

@@ -41,7 +41,7 @@ use forced_vi::SchemeId;
 use crate::baselines::Baseline;
 use crate::report::study::{self, run_cases, Study};
 use crate::report::table::write_csv;
-use crate::report::{readme, Method, Options, ReportError};
+use crate::report::{readme, Command, Method, Options, ReportError};
 
 mod adaptive_section;
 mod problem;
@@ -211,6 +211,28 @@ fn baseline_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, Base
     }
     jobs
 }
+
+/// `forced-vi-report stability`.
+pub const COMMAND: Command = Command {
+    name: "stability",
+    about: "Stiff and extreme cases: writes stability.csv and the stability section.",
+    sections: &[SECTION],
+    run: |opts, _| {
+        let s = run(opts)?;
+        let done = s
+            .rows
+            .iter()
+            .filter(|r| !r.outcome.to_string().starts_with("failed"))
+            .count();
+        Ok(format!(
+            "wrote {} ({} runs, {} finished) in {:.1} s",
+            opts.out.join("stability.csv").display(),
+            s.rows.len(),
+            done,
+            s.elapsed
+        ))
+    },
+};
 
 /// Runs the stability sweep and the stiff-baseline comparison, writes `stability.csv` and
 /// the `stability` section.

@@ -34,6 +34,7 @@
 
 use std::time::Instant;
 
+use crate::report::command::Command;
 use crate::report::style;
 use crate::report::table::write_csv;
 use crate::report::{readme, Options, ReportError};
@@ -52,6 +53,23 @@ pub use rows::{AllocCounter, CompileTimes, Memory, Row, StepCostRecord, Summary}
 
 /// The section name in `report/sections/`.
 pub const SECTION: &str = "step_cost";
+
+/// `forced-vi-report step-cost`.
+pub const COMMAND: Command = Command {
+    name: "step-cost",
+    about: "Per-step cost: generated against hand-written kernels, chain scaling, allocations, \
+            compile time and peak RSS (writes step_cost.csv and its section).",
+    sections: &[SECTION],
+    run: |opts, hooks| {
+        let summary = run(opts, hooks.allocations)?;
+        Ok(format!(
+            "wrote {} ({} rows) in {:.1} s",
+            opts.out.join("step_cost.csv").display(),
+            summary.rows.len(),
+            summary.elapsed
+        ))
+    },
+};
 
 /// Runs the step-cost measurements and writes `step_cost.csv`, the scaling plot and the
 /// section. `counter` reads the binary's counting allocator; without it the allocation

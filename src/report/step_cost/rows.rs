@@ -4,8 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::report::table::sci;
 
-/// Reads the process's heap-allocation count (the binary's counting allocator).
-pub type AllocCounter = fn() -> u64;
+pub use crate::report::command::AllocCounter;
 
 /// One row of `step_cost.csv`.
 #[derive(Clone, Debug, PartialEq)]

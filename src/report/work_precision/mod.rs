@@ -30,7 +30,9 @@
 
 use std::fs;
 
+use crate::report::command::Command;
 use crate::report::plan::{Plan, LONG_RUN_SCENE};
+use crate::report::poincare;
 use crate::report::study::{self, run_cases};
 use crate::report::table::write_csv;
 use crate::report::{readme, Method, Options, ReportError};
@@ -51,6 +53,30 @@ pub use section::TARGETS;
 
 /// The section name (`sections/work_precision.md`).
 pub const SECTION: &str = "work_precision";
+
+/// `forced-vi-report work-precision`, also what runs without a command.
+pub const COMMAND: Command = Command {
+    name: "work-precision",
+    about: "The work-precision report (what runs when no command is given).",
+    sections: &[SECTION, poincare::SECTION],
+    run: |opts, _| {
+        let summary = run(opts)?;
+        let mut line = String::new();
+        if opts.scenes.is_empty() || opts.scenes.iter().any(|s| s == poincare::SCENE) {
+            let points = poincare::run(opts)?;
+            line.push_str(&format!("Poincaré section: {points} points\n"));
+            readme::assemble(&opts.out)?;
+        }
+        line.push_str(&format!(
+            "wrote {} ({} runs, {} failed) in {:.1} s",
+            opts.out.join("README.md").display(),
+            summary.rows.len(),
+            summary.failures.len(),
+            summary.elapsed
+        ));
+        Ok(line)
+    },
+};
 
 /// Runs the work-precision report and writes its files into `opts.out`.
 pub fn run(opts: &Options) -> Result<Summary, ReportError> {
