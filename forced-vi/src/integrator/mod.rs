@@ -1,0 +1,258 @@
+//! The integrator: a model, a scheme and a step size, with the options of a run, and the
+//! ways to run it (collect, stream, iterate).
+//!
+//! | piece | module |
+//! |---|---|
+//! | [`Integrator`], its builder and its steppers; [`StepOptions`] | this one |
+//! | [`LinearPath`]: the choice of the dense or the sparse step | `path` |
+//! | the run methods: collect, stream, sample, final state | `run` |
+
+mod path;
+mod run;
+
+use crate::control::Tolerance;
+use crate::error::Error;
+use crate::initial::InitialState;
+use crate::model::ForcedLagrangian;
+use crate::newton::NewtonOptions;
+use crate::scheme::Scheme;
+#[cfg(feature = "sparse")]
+use crate::sparse::SparseStepper;
+use crate::stepper::Stepper;
+
+pub use path::LinearPath;
+
+/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
+/// [`StepOptions::DEFAULT_MAX_STEPS`] steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct StepOptions {
+    /// The Newton solver's options.
+    pub newton: NewtonOptions,
+    /// A failed step is retried as 2, 4, …, `2^max_subdivisions` substeps (default 0: off).
+    pub max_subdivisions: u32,
+    /// The most steps a run may take; a longer run is refused before it starts
+    /// ([`Error::TooManySteps`]).
+    pub max_steps: usize,
+}
+
+impl StepOptions {
+    /// The default cap on steps per run: 10⁹.
+    pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        StepOptions {
+            newton: NewtonOptions::default(),
+            max_subdivisions: 0,
+            max_steps: Self::DEFAULT_MAX_STEPS,
+        }
+    }
+}
+
+/// The deepest stack the integrator provides for a model's node kernels (4 GiB, mapped
+/// lazily: only the pages the kernels touch use memory).
+pub const MAX_KERNEL_STACK: usize = 4 << 30;
+
+/// A fixed-step variational integrator for one model and one scheme.
+///
+/// ```
+/// use forced_vi::prelude::*;
+///
+/// struct Oscillator;
+/// impl ForcedLagrangian<1> for Oscillator {
+///     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+///         (v[0] * v[0] - q[0] * q[0]) * 0.5
+///     }
+/// }
+///
+/// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?
+///     .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+///     .map_err(|f| f.error)?;
+/// let end = run.last().unwrap();
+/// assert!((end.q[0] - 1f64.cos()).abs() < 1e-9);
+/// # Ok::<(), forced_vi::Error>(())
+/// ```
+pub struct Integrator<'m, M, const N: usize> {
+    pub(crate) model: &'m M,
+    pub(crate) scheme: Scheme,
+    pub(crate) h: f64,
+    pub(crate) options: StepOptions,
+    /// With tolerances the run is adaptive and `h` is only its first step.
+    pub(crate) tolerance: Option<Tolerance<N>>,
+    pub(crate) linear_path: LinearPath,
+}
+
+// By hand: the model is borrowed, so neither needs `M: Clone` or `M: Debug`.
+impl<M, const N: usize> Clone for Integrator<'_, M, N> {
+    fn clone(&self) -> Self {
+        Integrator {
+            model: self.model,
+            scheme: self.scheme.clone(),
+            h: self.h,
+            options: self.options,
+            tolerance: self.tolerance,
+            linear_path: self.linear_path,
+        }
+    }
+}
+
+impl<M, const N: usize> std::fmt::Debug for Integrator<'_, M, N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Integrator")
+            .field("model", &std::any::type_name::<M>())
+            .field("scheme", &self.scheme.id())
+            .field("h", &self.h)
+            .field("options", &self.options)
+            .field("tolerance", &self.tolerance)
+            .field("linear_path", &self.linear_path)
+            .finish()
+    }
+}
+
+impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
+    /// The most subdivision levels a step may use: 2²⁰ substeps.
+    pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
+
+    /// An integrator with step `h`. Defaults: [`StepOptions::default`], fixed steps,
+    /// [`LinearPath::Auto`].
+    ///
+    /// Fails if `h` is not positive and finite (with `1/h` finite too), a model parameter
+    /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), or its
+    /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack (for a model with sparse
+    /// kernels, only when a run takes the dense path).
+    pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
+        if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
+            return Err(Error::InvalidStepSize { h });
+        }
+        if model.sparse_node().is_none() {
+            check_kernel_stack::<M, N>()?;
+        }
+        model
+            .check_parameters()
+            .map_err(|name| Error::NonFiniteParameter { name })?;
+        model
+            .check_model()
+            .map_err(|message| Error::InvalidModel { message })?;
+        Ok(Integrator {
+            model,
+            scheme,
+            h,
+            options: StepOptions::default(),
+            tolerance: None,
+            linear_path: LinearPath::Auto,
+        })
+    }
+
+    /// Replaces the Newton options.
+    #[must_use]
+    pub fn newton(mut self, newton: NewtonOptions) -> Self {
+        self.options.newton = newton;
+        self
+    }
+
+    /// Allows a failed step to be retried as up to `2^levels` substeps; `levels` is capped
+    /// at [`Self::MAX_SUBDIVISION_LEVELS`].
+    #[must_use]
+    pub fn max_subdivisions(mut self, levels: u32) -> Self {
+        self.options.max_subdivisions = levels.min(Self::MAX_SUBDIVISION_LEVELS);
+        self
+    }
+
+    /// Makes the run adaptive: steps are chosen to keep the error within `rtol · |y| + atol`
+    /// (positions and momenta), and `h` becomes the first step. See [`crate::control`] for
+    /// the estimate and the controller. Fails unless both are finite, non-negative and not
+    /// both zero.
+    ///
+    /// ```
+    /// use forced_vi::prelude::*;
+    /// # struct Oscillator;
+    /// # impl ForcedLagrangian<1> for Oscillator {
+    /// #     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+    /// #         (v[0] * v[0] - q[0] * q[0]) * 0.5
+    /// #     }
+    /// # }
+    /// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.1)?
+    ///     .tolerances(1e-8, 1e-8)?
+    ///     .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+    ///     .map_err(|f| f.error)?;
+    /// let end = run.last().unwrap();
+    /// assert!((end.q[0] - 10f64.cos()).abs() < 1e-6);
+    /// // Dense output between the steps.
+    /// let mid = run.at(5.0).unwrap();
+    /// assert!((mid.q[0] - 5f64.cos()).abs() < 1e-6);
+    /// # Ok::<(), forced_vi::Error>(())
+    /// ```
+    pub fn tolerances(self, rtol: f64, atol: f64) -> Result<Self, Error> {
+        Ok(self.tolerance(Tolerance::scalar(rtol, atol)?))
+    }
+
+    /// Makes the run adaptive with tolerances per coordinate (see [`Self::tolerances`]).
+    #[must_use]
+    pub fn tolerance(mut self, tolerance: Tolerance<N>) -> Self {
+        self.tolerance = Some(tolerance);
+        self
+    }
+
+    /// Chooses the linear algebra of the runs (default [`LinearPath::Auto`]).
+    #[must_use]
+    pub fn linear_path(mut self, path: LinearPath) -> Self {
+        self.linear_path = path;
+        self
+    }
+
+    /// Caps the steps of a run ([`StepOptions::DEFAULT_MAX_STEPS`] by default).
+    #[must_use]
+    pub fn max_steps(mut self, steps: usize) -> Self {
+        self.options.max_steps = steps;
+        self
+    }
+
+    /// The scheme.
+    pub fn scheme(&self) -> &Scheme {
+        &self.scheme
+    }
+
+    /// The step size.
+    pub fn step_size(&self) -> f64 {
+        self.h
+    }
+
+    /// The dense path's streaming stepper from `init` to `t_final`: an iterator of records,
+    /// initial state first, that holds only the current state. The run methods choose the
+    /// path by [`LinearPath`]; see [`Self::sparse_stepper`] for the sparse one.
+    pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
+        check_kernel_stack::<M, N>()?;
+        Stepper::new(self, init, t_final)
+    }
+
+    /// The sparse path's streaming stepper (DESIGN §9), for a model with sparse kernels.
+    /// Fails with [`Error::SparsePathUnavailable`] without them or with tolerances set.
+    #[cfg(feature = "sparse")]
+    pub fn sparse_stepper(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<SparseStepper<'_, M, N>, Error> {
+        let node = self
+            .model
+            .sparse_node()
+            .ok_or(Error::SparsePathUnavailable {
+                reason: "the model has no sparse node kernels",
+            })?;
+        let pattern = self.record_pattern(node, &init)?;
+        self.open_sparse(node, pattern, init, t_final)
+    }
+}
+
+/// Refuses a model whose dense kernels need more stack than [`MAX_KERNEL_STACK`].
+fn check_kernel_stack<M: ForcedLagrangian<N>, const N: usize>() -> Result<(), Error> {
+    if M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
+        return Err(Error::ModelTooLarge {
+            stack_bytes: M::KERNEL_STACK_BYTES,
+            max: MAX_KERNEL_STACK,
+        });
+    }
+    Ok(())
+}
