@@ -1,5 +1,5 @@
 //! Node-kernel cost, general num-dual path against the kernels `#[forced_lagrangian]` writes,
-//! in ns per node evaluation. Run with `cargo bench --bench node_eval`.
+//! in ns per node evaluation. Run with `cargo bench -p forced-vi-benches --bench node_eval`.
 //!
 //! - `CoupledVanDerPol` (the paper's model): all polynomial, so the specialised kernels are
 //!   plain `f64` code with a constant mass matrix;

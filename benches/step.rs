@@ -1,7 +1,8 @@
 //! Per-step cost of the paper's coupled van der Pol model, `#[forced_lagrangian]` kernels
 //! against hand-written analytic ones (`forced_vi_scenes::handwritten`), through the same
 //! stepper for every scheme at h = 0.01; plus the heap allocations per step, counted by a
-//! counting global allocator in this bench binary. Run with `cargo bench --bench step`.
+//! counting global allocator in this bench binary. Run with
+//! `cargo bench -p forced-vi-benches --bench step`.
 //!
 //! Each criterion iteration runs 100 steps from the paper's initial state (setup included), so
 //! the time is per 100 steps (throughput in steps); the allocation count is printed per step.
