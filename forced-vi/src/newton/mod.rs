@@ -6,10 +6,12 @@
 //!
 //! | piece | module |
 //! |---|---|
-//! | [`NonlinearSystem`], [`Newton`] and its iteration, [`NewtonReport`] | this one |
+//! | [`NonlinearSystem`], [`Newton`] on a dense Jacobian, [`NewtonReport`] | this one |
+//! | the iteration, generic over its linear algebra (shared with the sparse Newton) | `iteration` |
 //! | [`NewtonOptions`] and their checks | `options` |
 //! | dense LU: [`DenseLu`] for the step Jacobian, [`solve_small`] for `N × N` blocks | `lu` |
 
+mod iteration;
 mod lu;
 mod options;
 #[cfg(test)]
@@ -19,6 +21,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::NewtonFailure;
 
+pub use iteration::round_off_floor;
+pub(crate) use iteration::{Iteration, LinearSolver};
 pub use lu::{solve_small, DenseLu};
 pub use options::NewtonOptions;
 
@@ -31,9 +35,6 @@ pub trait NonlinearSystem {
     /// The Jacobian `∂R/∂z` at `z`.
     fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure>;
 }
-
-/// Simplified Newton refreshes its Jacobian when the contraction rate exceeds this.
-const THETA_REFRESH: f64 = 1e-2;
 
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,67 +53,72 @@ pub struct NewtonReport {
 /// The Newton solver with its reusable buffers.
 #[derive(Clone, Debug)]
 pub struct Newton {
-    opts: NewtonOptions,
+    iteration: Iteration<DVector<f64>>,
+    linear: DenseLinear,
+}
+
+/// The dense Jacobian and its LU factors.
+#[derive(Clone, Debug)]
+struct DenseLinear {
     lu: DenseLu,
     jac: DMatrix<f64>,
-    r: DVector<f64>,
-    r_trial: DVector<f64>,
-    dz: DVector<f64>,
-    z_trial: DVector<f64>,
-    have_factors: bool,
-    last_iterations: usize,
 }
 
-/// The round-off level of a residual whose terms, of size `scale` and `|J| · |z|`, cancel.
-#[inline]
-pub fn round_off_floor(scale: f64, jac_scale: f64, z_norm: f64) -> f64 {
-    64.0 * f64::EPSILON * (scale + jac_scale * z_norm)
-}
+impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
+    type Vector = DVector<f64>;
 
-/// Max-norm that propagates NaN (unlike `f64::max`).
-fn max_norm(x: &DVector<f64>) -> f64 {
-    let mut m = 0.0f64;
-    for &v in x.as_slice() {
-        let a = v.abs();
-        m = if a > m || a.is_nan() { a } else { m };
+    #[inline(always)]
+    fn residual(sys: &mut S, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        sys.residual(z, r)
     }
-    m
+
+    #[inline]
+    fn refresh(&mut self, sys: &mut S, z: &DVector<f64>) -> Result<f64, NewtonFailure> {
+        sys.jacobian(z, &mut self.jac)?;
+        self.lu.factor(&self.jac)?;
+        Ok(self
+            .jac
+            .as_slice()
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs())))
+    }
+
+    #[inline(always)]
+    fn solve_in_place(&mut self, b: &mut DVector<f64>) {
+        self.lu.solve_in_place(b);
+    }
 }
 
 impl Newton {
     /// A solver for systems of `n` unknowns.
     pub fn new(n: usize, opts: NewtonOptions) -> Self {
         Newton {
-            opts,
-            lu: DenseLu::new(n),
-            jac: DMatrix::zeros(n, n),
-            r: DVector::zeros(n),
-            r_trial: DVector::zeros(n),
-            dz: DVector::zeros(n),
-            z_trial: DVector::zeros(n),
-            have_factors: false,
-            last_iterations: 0,
+            iteration: Iteration::new(opts, DVector::zeros(n)),
+            linear: DenseLinear {
+                lu: DenseLu::new(n),
+                jac: DMatrix::zeros(n, n),
+            },
         }
     }
 
     /// The options in use.
     pub fn options(&self) -> &NewtonOptions {
-        &self.opts
+        &self.iteration.opts
     }
 
     /// The residual at the last accepted iterate (valid after a successful solve).
     pub fn residual(&self) -> &DVector<f64> {
-        &self.r
+        &self.iteration.r
     }
 
     /// Linear solves done by the last call to [`Newton::solve`], converged or not.
     pub fn last_iterations(&self) -> usize {
-        self.last_iterations
+        self.iteration.last_iterations
     }
 
     /// Forgets reusable Jacobian factors (call when the problem changes).
     pub fn invalidate(&mut self) {
-        self.have_factors = false;
+        self.iteration.have_factors = false;
     }
 
     /// Solves `R(z) = 0` from the initial guess in `z`, overwriting it.
@@ -137,164 +143,7 @@ impl Newton {
         z: &mut DVector<f64>,
         residual_scale: f64,
     ) -> Result<NewtonReport, NewtonFailure> {
-        let o = self.opts;
-        let scale = residual_scale.max(f64::MIN_POSITIVE);
-        let res_tol = o.residual_tol * scale;
-        let mut jac_scale = 0.0f64;
-        sys.residual(z, &mut self.r)?;
-        let mut rnorm = max_norm(&self.r);
-        if !rnorm.is_finite() {
-            return Err(NewtonFailure::NonFinite);
-        }
-        let (mut prev_step, mut backtracks, mut growth) = (f64::INFINITY, 0, 0);
-        self.last_iterations = 0;
-        for it in 1..=o.max_iterations {
-            self.last_iterations = it;
-            if !(o.simplified && self.have_factors) {
-                jac_scale = self.refresh(sys, z)?;
-            }
-            // Below this level residuals at the current iterate are round-off.
-            let res_floor = round_off_floor(scale, jac_scale, max_norm(z));
-            let full = self.direction()?;
-            let Some((lambda, halvings, trial_norm)) =
-                self.line_search(sys, z, rnorm, res_floor, full)?
-            else {
-                continue;
-            };
-            backtracks += halvings;
-            std::mem::swap(z, &mut self.z_trial);
-            std::mem::swap(&mut self.r, &mut self.r_trial);
-            let step = lambda * full;
-            let theta = step / prev_step;
-            if trial_norm > rnorm && it > 1 {
-                growth += 1;
-                if growth >= 3 {
-                    return Err(NewtonFailure::Diverged {
-                        residual: trial_norm,
-                    });
-                }
-            }
-            rnorm = trial_norm;
-            prev_step = step;
-            let znorm = max_norm(z);
-            let floor = round_off_floor(scale, jac_scale, znorm);
-            // A residual at the round-off floor cannot be reduced further: the iterate is as
-            // exact as the problem's conditioning allows, even if the increments are noise.
-            let at_floor = it > 1 && rnorm <= floor;
-            let small_error = error_estimate(it, step, theta) <= o.rtol * znorm + o.atol;
-            if (small_error && rnorm <= res_tol && halvings == 0) || at_floor {
-                return Ok(NewtonReport {
-                    iterations: it,
-                    residual: rnorm,
-                    backtracks,
-                    residual_bound: res_tol.max(floor),
-                });
-            }
-            if o.simplified && wants_fresh_jacobian(it, theta, step, znorm) {
-                self.have_factors = false;
-            }
-        }
-        Err(NewtonFailure::MaxIterations { residual: rnorm })
+        self.iteration
+            .solve(&mut self.linear, sys, z, residual_scale)
     }
-
-    /// A fresh Jacobian at `z`, factored; returns its largest entry `|J|`.
-    #[inline]
-    fn refresh<S: NonlinearSystem>(
-        &mut self,
-        sys: &mut S,
-        z: &DVector<f64>,
-    ) -> Result<f64, NewtonFailure> {
-        sys.jacobian(z, &mut self.jac)?;
-        self.lu.factor(&self.jac)?;
-        self.have_factors = true;
-        Ok(self
-            .jac
-            .as_slice()
-            .iter()
-            .fold(0.0f64, |m, x| m.max(x.abs())))
-    }
-
-    /// The Newton direction `dz = −J⁻¹ R` from the current factors; returns `|dz|`.
-    #[inline]
-    fn direction(&mut self) -> Result<f64, NewtonFailure> {
-        self.dz.as_mut_slice().copy_from_slice(self.r.as_slice());
-        self.lu.solve_in_place(&mut self.dz);
-        self.dz.neg_mut();
-        let full = max_norm(&self.dz);
-        if !full.is_finite() {
-            return Err(NewtonFailure::NonFinite);
-        }
-        Ok(full)
-    }
-
-    /// The line search on the residual norm along `dz`, whose norm is `full`:
-    /// `Some((λ, halvings, |R|))` with the trial in `z_trial` and `r_trial`, or `None` when
-    /// stale factors must be refreshed and the iteration retried.
-    #[inline]
-    fn line_search<S: NonlinearSystem>(
-        &mut self,
-        sys: &mut S,
-        z: &DVector<f64>,
-        rnorm: f64,
-        res_floor: f64,
-        full: f64,
-    ) -> Result<Option<(f64, usize, f64)>, NewtonFailure> {
-        let o = self.opts;
-        let (mut lambda, mut halvings) = (1.0, 0);
-        loop {
-            for ((t, x), d) in self
-                .z_trial
-                .as_mut_slice()
-                .iter_mut()
-                .zip(z.as_slice())
-                .zip(self.dz.as_slice())
-            {
-                *t = x + lambda * d;
-            }
-            let tn = match sys.residual(&self.z_trial, &mut self.r_trial) {
-                Ok(()) => max_norm(&self.r_trial),
-                Err(_) => f64::NAN,
-            };
-            if tn.is_finite() && (tn <= rnorm * (1.0 - 1e-4 * lambda) || tn <= res_floor) {
-                return Ok(Some((lambda, halvings, tn)));
-            }
-            // A full step that grows the residual right next to the solution is still
-            // accepted once: Newton's local convergence, not the norm, is then in charge.
-            if tn.is_finite() && halvings == 0 && full <= o.rtol * max_norm(z) + o.atol {
-                return Ok(Some((lambda, halvings, tn)));
-            }
-            halvings += 1;
-            if halvings > o.max_backtracks {
-                if o.simplified && self.have_factors {
-                    // Stale factors: retry this iteration with a fresh Jacobian.
-                    self.have_factors = false;
-                    return Ok(None);
-                }
-                return Err(NewtonFailure::Stagnated { residual: rnorm });
-            }
-            lambda *= 0.5;
-        }
-    }
-}
-
-/// The estimated error of the iterate after a step of size `step` with contraction rate
-/// `θ` (Hairer's `step · θ / (1 − θ)`; the step itself on the first iteration).
-#[inline]
-pub(crate) fn error_estimate(it: usize, step: f64, theta: f64) -> f64 {
-    if it == 1 || !theta.is_finite() {
-        step
-    } else if theta < 1.0 {
-        step * theta / (1.0 - theta)
-    } else {
-        f64::INFINITY
-    }
-}
-
-/// Whether simplified Newton should refresh its factors after iteration `it`. Stale factors
-/// contract slowly; a fresh Jacobian restores quadratic convergence, so the accepted iterate
-/// is as exact as full Newton's. After the first iteration θ is unknown; a small first
-/// correction means a good initial guess, so the factors taken there stay accurate.
-#[inline]
-pub(crate) fn wants_fresh_jacobian(it: usize, theta: f64, step: f64, znorm: f64) -> bool {
-    (it == 1 || theta > THETA_REFRESH) && (it > 1 || step > 1e-3 * znorm)
 }

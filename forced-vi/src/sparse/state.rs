@@ -3,6 +3,7 @@
 
 use crate::error::NewtonFailure;
 use crate::sparse::node::SparseNode;
+use crate::stepper::kahan_add;
 
 /// Compensated (Kahan) accumulation of a vector.
 #[derive(Clone, Debug)]
@@ -22,10 +23,7 @@ impl KahanVec {
     /// Adds `dx` to component `i`.
     #[inline]
     pub(crate) fn add(&mut self, i: usize, dx: f64) {
-        let y = dx - self.comp[i];
-        let t = self.sum[i] + y;
-        self.comp[i] = (t - self.sum[i]) - y;
-        self.sum[i] = t;
+        kahan_add(&mut self.sum[i], &mut self.comp[i], dx);
     }
 
     fn copy_from(&mut self, other: &KahanVec) {
@@ -82,10 +80,8 @@ impl State {
 
     /// Adds `dw` to the ledger.
     pub(crate) fn add_work(&mut self, dw: f64) {
-        let (w, c) = self.work;
-        let y = dw - c;
-        let t = w + y;
-        self.work = (t, (t - w) - y);
+        let (w, c) = &mut self.work;
+        kahan_add(w, c, dw);
     }
 }
 

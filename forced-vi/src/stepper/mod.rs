@@ -29,6 +29,8 @@ use crate::trajectory::{energy, non_finite_field, RunStats, StepRecord};
 
 #[cfg(feature = "sparse")]
 pub(crate) use checks::{check_finite, check_run, step_count};
+#[cfg(feature = "sparse")]
+pub(crate) use state::kahan_add;
 use state::Kahan;
 
 /// Runs `f` on a stack with room for the model's node kernels: the caller's own stack when

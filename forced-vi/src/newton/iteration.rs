@@ -1,0 +1,256 @@
+//! The Newton iteration itself, generic over its linear algebra: the dense [`Newton`] and the
+//! sparse Newton of [`crate::sparse`] run this one loop (simplified Newton with factors kept
+//! while the contraction rate stays below 1e-2, convergence on both the estimated error and
+//! the residual, a line search on the residual norm) and differ only in how the Jacobian is
+//! stored, factored and solved.
+//!
+//! [`Newton`]: super::Newton
+
+use nalgebra::DVector;
+
+use super::{NewtonOptions, NewtonReport};
+use crate::error::NewtonFailure;
+
+/// Simplified Newton refreshes its Jacobian when the contraction rate exceeds this.
+const THETA_REFRESH: f64 = 1e-2;
+
+/// A vector of the iteration: the unknowns, the residual and the buffers.
+pub(crate) trait Buffer {
+    /// The entries.
+    fn entries(&self) -> &[f64];
+    /// The entries, to write.
+    fn entries_mut(&mut self) -> &mut [f64];
+}
+
+impl Buffer for DVector<f64> {
+    #[inline(always)]
+    fn entries(&self) -> &[f64] {
+        self.as_slice()
+    }
+    #[inline(always)]
+    fn entries_mut(&mut self) -> &mut [f64] {
+        self.as_mut_slice()
+    }
+}
+
+impl Buffer for Vec<f64> {
+    #[inline(always)]
+    fn entries(&self) -> &[f64] {
+        self
+    }
+    #[inline(always)]
+    fn entries_mut(&mut self) -> &mut [f64] {
+        self
+    }
+}
+
+/// The linear algebra of a Newton solver for systems `S`: the Jacobian's storage and
+/// factors.
+pub(crate) trait LinearSolver<S: ?Sized> {
+    /// The vectors of the systems.
+    type Vector: Buffer;
+    /// The residual of `sys` at `z`.
+    fn residual(sys: &mut S, z: &Self::Vector, r: &mut Self::Vector) -> Result<(), NewtonFailure>;
+    /// The Jacobian of `sys` at `z`, factored; returns its largest entry `|J|`.
+    fn refresh(&mut self, sys: &mut S, z: &Self::Vector) -> Result<f64, NewtonFailure>;
+    /// Solves `J x = b` in place with the last factors.
+    fn solve_in_place(&mut self, b: &mut Self::Vector);
+}
+
+/// The state and buffers of the iteration, made once.
+#[derive(Clone, Debug)]
+pub(crate) struct Iteration<V> {
+    pub(crate) opts: NewtonOptions,
+    pub(crate) r: V,
+    r_trial: V,
+    dz: V,
+    z_trial: V,
+    pub(crate) have_factors: bool,
+    pub(crate) last_iterations: usize,
+}
+
+/// Max-norm that propagates NaN (unlike `f64::max`).
+fn max_norm(x: &[f64]) -> f64 {
+    let mut m = 0.0f64;
+    for &v in x {
+        let a = v.abs();
+        m = if a > m || a.is_nan() { a } else { m };
+    }
+    m
+}
+
+/// The round-off level of a residual whose terms, of size `scale` and `|J| · |z|`, cancel.
+#[inline]
+pub fn round_off_floor(scale: f64, jac_scale: f64, z_norm: f64) -> f64 {
+    64.0 * f64::EPSILON * (scale + jac_scale * z_norm)
+}
+
+impl<V: Buffer + Clone> Iteration<V> {
+    /// Buffers copied from `zero`, a vector of the systems' size.
+    pub(crate) fn new(opts: NewtonOptions, zero: V) -> Self {
+        Iteration {
+            opts,
+            r: zero.clone(),
+            r_trial: zero.clone(),
+            dz: zero.clone(),
+            z_trial: zero,
+            have_factors: false,
+            last_iterations: 0,
+        }
+    }
+}
+
+impl<V: Buffer> Iteration<V> {
+    /// Solves `R(z) = 0` from the guess in `z`; see [`super::Newton::solve`] for the tests
+    /// and the bound an `Ok` iterate meets.
+    pub(crate) fn solve<S: ?Sized, L: LinearSolver<S, Vector = V>>(
+        &mut self,
+        lin: &mut L,
+        sys: &mut S,
+        z: &mut V,
+        residual_scale: f64,
+    ) -> Result<NewtonReport, NewtonFailure> {
+        let o = self.opts;
+        let scale = residual_scale.max(f64::MIN_POSITIVE);
+        let res_tol = o.residual_tol * scale;
+        let mut jac_scale = 0.0f64;
+        L::residual(sys, z, &mut self.r)?;
+        let mut rnorm = max_norm(self.r.entries());
+        if !rnorm.is_finite() {
+            return Err(NewtonFailure::NonFinite);
+        }
+        let (mut prev_step, mut backtracks, mut growth) = (f64::INFINITY, 0, 0);
+        self.last_iterations = 0;
+        for it in 1..=o.max_iterations {
+            self.last_iterations = it;
+            if !(o.simplified && self.have_factors) {
+                jac_scale = lin.refresh(sys, z)?;
+                self.have_factors = true;
+            }
+            // Below this level residuals at the current iterate are round-off.
+            let res_floor = round_off_floor(scale, jac_scale, max_norm(z.entries()));
+            let full = self.direction(lin)?;
+            let Some((lambda, halvings, trial_norm)) =
+                self.line_search::<S, L>(sys, z, rnorm, res_floor, full)?
+            else {
+                continue;
+            };
+            backtracks += halvings;
+            std::mem::swap(z, &mut self.z_trial);
+            std::mem::swap(&mut self.r, &mut self.r_trial);
+            let step = lambda * full;
+            let theta = step / prev_step;
+            if trial_norm > rnorm && it > 1 {
+                growth += 1;
+                if growth >= 3 {
+                    return Err(NewtonFailure::Diverged {
+                        residual: trial_norm,
+                    });
+                }
+            }
+            rnorm = trial_norm;
+            prev_step = step;
+            let znorm = max_norm(z.entries());
+            let floor = round_off_floor(scale, jac_scale, znorm);
+            // A residual at the round-off floor cannot be reduced further: the iterate is as
+            // exact as the problem's conditioning allows, even if the increments are noise.
+            let at_floor = it > 1 && rnorm <= floor;
+            let small_error = error_estimate(it, step, theta) <= o.rtol * znorm + o.atol;
+            if (small_error && rnorm <= res_tol && halvings == 0) || at_floor {
+                return Ok(NewtonReport {
+                    iterations: it,
+                    residual: rnorm,
+                    backtracks,
+                    residual_bound: res_tol.max(floor),
+                });
+            }
+            if o.simplified && wants_fresh_jacobian(it, theta, step, znorm) {
+                self.have_factors = false;
+            }
+        }
+        Err(NewtonFailure::MaxIterations { residual: rnorm })
+    }
+
+    /// The Newton direction `dz = −J⁻¹ R` from the current factors; returns `|dz|`.
+    #[inline]
+    fn direction<S: ?Sized, L: LinearSolver<S, Vector = V>>(
+        &mut self,
+        lin: &mut L,
+    ) -> Result<f64, NewtonFailure> {
+        self.dz.entries_mut().copy_from_slice(self.r.entries());
+        lin.solve_in_place(&mut self.dz);
+        let dz = self.dz.entries_mut();
+        dz.iter_mut().for_each(|x| *x = -*x);
+        let full = max_norm(dz);
+        if !full.is_finite() {
+            return Err(NewtonFailure::NonFinite);
+        }
+        Ok(full)
+    }
+
+    /// The line search on the residual norm along `dz`, whose norm is `full`:
+    /// `Some((λ, halvings, |R|))` with the trial in `z_trial` and `r_trial`, or `None` when
+    /// stale factors must be refreshed and the iteration retried.
+    #[inline]
+    fn line_search<S: ?Sized, L: LinearSolver<S, Vector = V>>(
+        &mut self,
+        sys: &mut S,
+        z: &V,
+        rnorm: f64,
+        res_floor: f64,
+        full: f64,
+    ) -> Result<Option<(f64, usize, f64)>, NewtonFailure> {
+        let o = self.opts;
+        let (mut lambda, mut halvings) = (1.0, 0);
+        loop {
+            let trial = self.z_trial.entries_mut();
+            for ((t, x), d) in trial.iter_mut().zip(z.entries()).zip(self.dz.entries()) {
+                *t = x + lambda * d;
+            }
+            let tn = match L::residual(sys, &self.z_trial, &mut self.r_trial) {
+                Ok(()) => max_norm(self.r_trial.entries()),
+                Err(_) => f64::NAN,
+            };
+            if tn.is_finite() && (tn <= rnorm * (1.0 - 1e-4 * lambda) || tn <= res_floor) {
+                return Ok(Some((lambda, halvings, tn)));
+            }
+            // A full step that grows the residual right next to the solution is still
+            // accepted once: Newton's local convergence, not the norm, is then in charge.
+            if tn.is_finite() && halvings == 0 && full <= o.rtol * max_norm(z.entries()) + o.atol {
+                return Ok(Some((lambda, halvings, tn)));
+            }
+            halvings += 1;
+            if halvings > o.max_backtracks {
+                if o.simplified && self.have_factors {
+                    // Stale factors: retry this iteration with a fresh Jacobian.
+                    self.have_factors = false;
+                    return Ok(None);
+                }
+                return Err(NewtonFailure::Stagnated { residual: rnorm });
+            }
+            lambda *= 0.5;
+        }
+    }
+}
+
+/// The estimated error of the iterate after a step of size `step` with contraction rate
+/// `θ` (Hairer's `step · θ / (1 − θ)`; the step itself on the first iteration).
+#[inline]
+fn error_estimate(it: usize, step: f64, theta: f64) -> f64 {
+    if it == 1 || !theta.is_finite() {
+        step
+    } else if theta < 1.0 {
+        step * theta / (1.0 - theta)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Whether simplified Newton should refresh its factors after iteration `it`. Stale factors
+/// contract slowly; a fresh Jacobian restores quadratic convergence, so the accepted iterate
+/// is as exact as full Newton's. After the first iteration θ is unknown; a small first
+/// correction means a good initial guess, so the factors taken there stay accurate.
+#[inline]
+fn wants_fresh_jacobian(it: usize, theta: f64, step: f64, znorm: f64) -> bool {
+    (it == 1 || theta > THETA_REFRESH) && (it > 1 || step > 1e-3 * znorm)
+}
