@@ -8,7 +8,8 @@ use crate::scalar::lift;
 use crate::sparse::state::StepFailure;
 use crate::sparse::stepper::SparseStepper;
 use crate::sparse::velocity::outside_pattern;
-use crate::trajectory::{non_finite_field, StepRecord};
+use crate::stepper::{newton_error, record_error};
+use crate::trajectory::StepRecord;
 
 impl<M: ForcedLagrangian<N>, const N: usize> SparseStepper<'_, M, N> {
     /// One step of size `h` from the current state.
@@ -160,20 +161,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> SparseStepper<'_, M, N> {
         }
         self.solve_velocity()?;
         let rec = self.record(iters, residual, substeps, true);
-        if let Some(quantity) = non_finite_field(&rec) {
-            let size = [&rec.q, &rec.p, &rec.v]
+        let size = || {
+            [&rec.q, &rec.p, &rec.v]
                 .iter()
-                .fold(0.0f64, |m, x| m.max(x.amax()));
-            let nan = rec.energy.is_nan() || rec.energy_balance.is_nan();
-            return Err(if nan && size.is_finite() && size < f64::MAX.sqrt() {
-                Error::NonFiniteModel { step: self.k, t }
-            } else {
-                Error::Overflow {
-                    step: self.k,
-                    t,
-                    quantity,
-                }
-            });
+                .fold(0.0f64, |m, x| m.max(x.amax()))
+        };
+        if let Some(error) = record_error(&rec, size, self.k, t) {
+            return Err(error);
         }
         Ok(rec)
     }
@@ -185,34 +179,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> SparseStepper<'_, M, N> {
             StepFailure::OutsidePattern => return outside_pattern(),
             StepFailure::Newton(f) => f,
         };
-        let residual = match failure {
-            NewtonFailure::MaxIterations { residual }
-            | NewtonFailure::Diverged { residual }
-            | NewtonFailure::Stagnated { residual } => residual,
-            _ => f64::NAN,
-        };
-        if failure == NewtonFailure::NonFinite {
-            let st = &self.state;
-            let size = [&st.q.sum, &st.p.sum, &st.v]
-                .iter()
-                .flat_map(|x| x.iter())
-                .fold(0.0f64, |m, x| m.max(x.abs()));
-            return if size >= f64::MAX.sqrt() {
-                Error::Overflow {
-                    step,
-                    t: t0,
-                    quantity: "state",
-                }
-            } else {
-                Error::NonFiniteModel { step, t: t0 }
-            };
-        }
-        Error::NewtonFailed {
-            step,
-            t: t0,
-            residual,
-            failure,
-        }
+        let st = &self.state;
+        let size = [&st.q.sum, &st.p.sum, &st.v]
+            .iter()
+            .flat_map(|x| x.iter())
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        newton_error(failure, size, step, t0)
     }
 }
 

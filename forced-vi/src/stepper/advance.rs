@@ -4,7 +4,7 @@
 
 use nalgebra::SVector;
 
-use super::checks::non_finite;
+use super::checks::{newton_error, record_error};
 use super::state::kahan_add;
 use super::Stepper;
 use crate::error::{Error, NewtonFailure};
@@ -12,7 +12,7 @@ use crate::initial::{mass_factor, solve_velocity, MIN_MASS_RCOND};
 use crate::integrator::Integrator;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonReport;
-use crate::trajectory::{non_finite_field, StepRecord};
+use crate::trajectory::StepRecord;
 
 /// Why one attempt at a step failed.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -241,20 +241,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         }
         self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
         let rec = self.record(iters, residual, substeps);
-        if let Some(quantity) = non_finite_field(&rec) {
-            // A NaN is the model's (a Lagrangian that is NaN at a representable state); an
-            // infinity from a huge state is an overflow.
-            let size = rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
-            let nan = [rec.energy, rec.energy_balance].iter().any(|x| x.is_nan());
-            return Err(if nan && size.is_finite() && size < f64::MAX.sqrt() {
-                Error::NonFiniteModel { step: self.k, t }
-            } else {
-                Error::Overflow {
-                    step: self.k,
-                    t,
-                    quantity,
-                }
-            });
+        let size = || rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
+        if let Some(error) = record_error(&rec, size, self.k, t) {
+            return Err(error);
         }
         Ok(rec)
     }
@@ -268,21 +257,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             StepFailure::Newton(f) => f,
         };
-        let residual = match failure {
-            NewtonFailure::MaxIterations { residual }
-            | NewtonFailure::Diverged { residual }
-            | NewtonFailure::Stagnated { residual } => residual,
-            _ => f64::NAN,
-        };
-        if failure == NewtonFailure::NonFinite {
-            let size = self.q.sum.amax().max(self.p.sum.amax()).max(self.v.amax());
-            return non_finite(size, step, t0, "state");
-        }
-        Error::NewtonFailed {
-            step,
-            t: t0,
-            residual,
-            failure,
-        }
+        let size = self.q.sum.amax().max(self.p.sum.amax()).max(self.v.amax());
+        newton_error(failure, size, step, t0)
     }
 }

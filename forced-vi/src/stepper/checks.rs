@@ -3,9 +3,10 @@
 
 use nalgebra::SVector;
 
-use crate::error::Error;
+use crate::error::{Error, NewtonFailure};
 use crate::integrator::StepOptions;
 use crate::model::ForcedLagrangian;
+use crate::trajectory::{non_finite_field, StepRecord};
 
 /// Refuses a final time that is negative or not finite, and invalid Newton options.
 pub(crate) fn check_run(options: &StepOptions, t_final: f64) -> Result<(), Error> {
@@ -83,5 +84,44 @@ pub(crate) fn non_finite(size: f64, step: usize, t: f64, quantity: &'static str)
         Error::Overflow { step, t, quantity }
     } else {
         Error::NonFiniteModel { step, t }
+    }
+}
+
+/// The error for a record of step `step` at `t` with a field that is not finite, if it has
+/// one; `size` gives the max-norm of its state. A NaN energy at a representable state is the
+/// model's (a Lagrangian that is NaN there); an infinity from a huge state is an overflow.
+pub(crate) fn record_error<const N: usize>(
+    rec: &StepRecord<N>,
+    size: impl FnOnce() -> f64,
+    step: usize,
+    t: f64,
+) -> Option<Error> {
+    let quantity = non_finite_field(rec)?;
+    let size = size();
+    let nan = rec.energy.is_nan() || rec.energy_balance.is_nan();
+    Some(if nan && size.is_finite() && size < f64::MAX.sqrt() {
+        Error::NonFiniteModel { step, t }
+    } else {
+        Error::Overflow { step, t, quantity }
+    })
+}
+
+/// The error for a Newton solve that failed on step `step` from `t0`, from a state of
+/// max-norm `size`.
+pub(crate) fn newton_error(failure: NewtonFailure, size: f64, step: usize, t0: f64) -> Error {
+    let residual = match failure {
+        NewtonFailure::MaxIterations { residual }
+        | NewtonFailure::Diverged { residual }
+        | NewtonFailure::Stagnated { residual } => residual,
+        _ => f64::NAN,
+    };
+    if failure == NewtonFailure::NonFinite {
+        return non_finite(size, step, t0, "state");
+    }
+    Error::NewtonFailed {
+        step,
+        t: t0,
+        residual,
+        failure,
     }
 }

@@ -28,7 +28,7 @@ use crate::step_equations::StepProblem;
 use crate::trajectory::{energy, non_finite_field, RunStats, StepRecord};
 
 #[cfg(feature = "sparse")]
-pub(crate) use checks::{check_finite, check_run, step_count};
+pub(crate) use checks::{check_finite, check_run, newton_error, record_error, step_count};
 #[cfg(feature = "sparse")]
 pub(crate) use state::kahan_add;
 use state::Kahan;
