@@ -2,7 +2,7 @@
 //!
 //! The path over one step is the polynomial through control points at the nodes `d`
 //! (`d₀ = 0`, `d_{s−1} = 1`); the action is approximated by the quadrature `(c, b)` on
-//! `[0, 1]`. All schemes share one residual and Jacobian assembly in [`crate::integrator`].
+//! `[0, 1]`. All schemes share one residual and Jacobian assembly, in `step_equations` (DESIGN §3).
 //!
 //! | piece | module |
 //! |---|---|
