@@ -5,10 +5,9 @@
 //! failing cases only, trybuild checks instead of building, so its dependencies are not
 //! compiled a second time with code generation.
 //!
-//! The runner lives here rather than in the root package or in `forced-vi`: trybuild checks the
-//! cases against the dependencies of the package that runs it, and here that is `forced-vi`
-//! without default features (no faer, no rayon), not the report's (diffsol,
-//! plotters, ...).
+//! The runner has a package of its own (`ui-tests/`): trybuild checks the cases against the
+//! dependencies of the package that runs it, and here that is `forced-vi` without default
+//! features (no faer, no rayon), not the report's (diffsol, plotters, ...).
 
 #[test]
 fn ui() {
