@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId};
+use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId, Stepper};
 
 use super::rows::{BaselineRow, Outcome, Row, MAX_SUBDIVISIONS};
 use crate::baselines::{self, Baseline, OdeSystem};
@@ -80,32 +80,35 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
             subdivided_steps: 0,
             seconds: 0.0,
         };
-        let scheme = match Scheme::new(id) {
-            Ok(s) => s,
-            Err(e) => {
-                row.outcome = Outcome::Failed(forced_vi::Error::from(e).kind());
-                return row;
-            }
-        };
-        let built = Integrator::new(&self.model, scheme, h_model).and_then(|i| match tol {
-            Some(t) => i.tolerances(t, t),
-            None => Ok(i.max_subdivisions(MAX_SUBDIVISIONS)),
-        });
-        let integ = match built {
-            Ok(i) => i,
-            Err(e) => {
-                row.outcome = Outcome::Failed(e.kind());
-                return row;
-            }
-        };
         let init = InitialState::from_velocity(self.q0, self.v0);
-        let mut stepper = match integ.stepper(init, self.t_final) {
-            Ok(s) => s,
-            Err(e) => {
-                row.outcome = Outcome::Failed(e.kind());
-                return row;
-            }
-        };
+        let opened = self.integrator(id, h_model, tol).and_then(|integ| {
+            let mut stepper = integ.stepper(init, self.t_final)?;
+            self.drain(&mut stepper, &mut row);
+            Ok(())
+        });
+        if let Err(e) = opened {
+            row.outcome = Outcome::Failed(e.kind());
+        }
+        row.seconds = start.elapsed().as_secs_f64();
+        row
+    }
+
+    /// The integrator of a run: fixed steps with subdivision, or adaptive at `rtol = atol = tol`.
+    fn integrator(
+        &self,
+        id: SchemeId,
+        h_model: f64,
+        tol: Option<f64>,
+    ) -> Result<Integrator<'_, M, N>, forced_vi::Error> {
+        let integ = Integrator::new(&self.model, Scheme::new(id)?, h_model)?;
+        match tol {
+            Some(t) => integ.tolerances(t, t),
+            None => Ok(integ.max_subdivisions(MAX_SUBDIVISIONS)),
+        }
+    }
+
+    /// Runs `stepper` to its end or its first error and fills the row's outcome and totals.
+    fn drain(&self, stepper: &mut Stepper<'_, M, N>, row: &mut Row) {
         let mut last_q: Option<Vec<f64>> = None;
         let mut max_eb: f64 = 0.0;
         let mut error = None;
@@ -144,8 +147,6 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
                 }
             }
         };
-        row.seconds = start.elapsed().as_secs_f64();
-        row
     }
 
     /// The final positions of a baseline run.
