@@ -301,7 +301,7 @@ where
             })
         }
         Baseline::Dop853 => dop853(system, tol, y0, t_final, &mut on_step)?,
-        _ => diffsol_run(system, solver, tol, y0, t_final, &mut on_step)?,
+        _ => diffsol_run(system, system.dim(), solver, tol, y0, t_final, &mut on_step)?,
     };
     if run.y.iter().all(|x| x.is_finite()) {
         Ok(run)
@@ -313,23 +313,40 @@ where
     }
 }
 
-/// ode_solvers' `System` for an [`OdeSystem`].
-struct Dop853System<'a, 'm, M, const N: usize>(&'a OdeSystem<'m, M, N>);
+/// `y' = f(t, y)` with the model's type erased: the solvers' code below is compiled once, not
+/// once per model (it was about a quarter of this crate's machine code).
+trait Rhs {
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]);
+    fn jacobian_times(&self, t: f64, y: &[f64], w: &[f64], out: &mut [f64]);
+}
 
-impl<M: ForcedLagrangian<N>, const N: usize> ode_solvers::System<f64, ode_solvers::DVector<f64>>
-    for Dop853System<'_, '_, M, N>
-{
+impl<M: ForcedLagrangian<N>, const N: usize> Rhs for OdeSystem<'_, M, N> {
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        OdeSystem::rhs(self, t, y, dy)
+    }
+    fn jacobian_times(&self, t: f64, y: &[f64], w: &[f64], out: &mut [f64]) {
+        OdeSystem::jacobian_times(self, t, y, w, out)
+    }
+}
+
+/// A reported step: `(t, y)`.
+type OnStep<'a> = &'a mut dyn FnMut(f64, &[f64]);
+
+/// ode_solvers' `System` for an [`OdeSystem`].
+struct Dop853System<'a>(&'a dyn Rhs);
+
+impl ode_solvers::System<f64, ode_solvers::DVector<f64>> for Dop853System<'_> {
     fn system(&self, t: f64, y: &ode_solvers::DVector<f64>, dy: &mut ode_solvers::DVector<f64>) {
         self.0.rhs(t, y.as_slice(), dy.as_mut_slice());
     }
 }
 
-fn dop853<M: ForcedLagrangian<N>, const N: usize>(
-    system: &OdeSystem<'_, M, N>,
+fn dop853(
+    system: &dyn Rhs,
     tol: f64,
     y0: &[f64],
     t_final: f64,
-    on_step: &mut impl FnMut(f64, &[f64]),
+    on_step: OnStep<'_>,
 ) -> Result<BaselineRun, BaselineError> {
     let fail = |message: String| BaselineError::Solver {
         solver: "dop853",
@@ -376,13 +393,14 @@ fn dop853<M: ForcedLagrangian<N>, const N: usize>(
     })
 }
 
-fn diffsol_run<M: ForcedLagrangian<N>, const N: usize>(
-    system: &OdeSystem<'_, M, N>,
+fn diffsol_run(
+    system: &dyn Rhs,
+    n: usize,
     solver: Baseline,
     tol: f64,
     y0: &[f64],
     t_final: f64,
-    on_step: &mut impl FnMut(f64, &[f64]),
+    on_step: OnStep<'_>,
 ) -> Result<BaselineRun, BaselineError> {
     use diffsol::{NalgebraLU, NalgebraMat, OdeBuilder};
     type Lu = NalgebraLU<f64>;
@@ -390,7 +408,6 @@ fn diffsol_run<M: ForcedLagrangian<N>, const N: usize>(
         solver: solver.name(),
         message,
     };
-    let n = system.dim();
     let init = y0.to_vec();
     let problem = OdeBuilder::<NalgebraMat<f64>>::new()
         .rtol(tol)
@@ -425,11 +442,7 @@ fn diffsol_run<M: ForcedLagrangian<N>, const N: usize>(
 }
 
 /// Steps a diffsol solver to `t_final` exactly, reporting every accepted step.
-fn drive<'a, Eqn, S>(
-    s: &mut S,
-    t_final: f64,
-    on_step: &mut impl FnMut(f64, &[f64]),
-) -> Result<BaselineRun, String>
+fn drive<'a, Eqn, S>(s: &mut S, t_final: f64, on_step: OnStep<'_>) -> Result<BaselineRun, String>
 where
     Eqn: diffsol::OdeEquations<T = f64, V = diffsol::NalgebraVec<f64>> + 'a,
     S: diffsol::OdeSolverMethod<'a, Eqn>,
