@@ -33,7 +33,7 @@ impl LinearPath {
     /// The fewest coordinates for which [`LinearPath::Auto`] takes the sparse path.
     ///
     /// Measured on the hand-written FPU chain (3 entries per row, lobatto3, release, medians;
-    /// `examples/large_chain.rs --scaling`): dense 15.5, 46.5, 256 and 1941 µs per step at
+    /// `examples/large_chain.rs --crossover`): dense 15.5, 46.5, 256 and 1941 µs per step at
     /// n = 4, 8, 16 and 32, sparse 4.0, 6.0, 10.2 and 21.8 µs. The sparse step wins from
     /// n = 4 against general dense kernels; the macro's specialised dense kernels of small
     /// models take a few µs, so below n = 8 the dense path is kept.
