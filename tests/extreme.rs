@@ -6,7 +6,7 @@
 
 use forced_vi::prelude::*;
 use forced_vi::{Error, NewtonFailure, NewtonOptions, RunFailure};
-use forced_vi_scenes::models::CoupledVanDerPol;
+use forced_vi_models::models::CoupledVanDerPol;
 
 fn cvdp_run(h: f64, t_final: f64, init: InitialState<2>) -> Result<Trajectory<2>, RunFailure<2>> {
     let model = CoupledVanDerPol::PAPER;
@@ -242,7 +242,7 @@ fn extreme_huge_step_is_finite_or_typed() {
 fn extreme_very_stiff_steps_converge_at_round_off() {
     // μ = 1e6 with h = 100 and 1000: the step's residual sits at round-off of terms that
     // cancel; Newton must accept it instead of reporting a failure.
-    let model = forced_vi_scenes::models::StiffVanDerPol::VERY_STIFF;
+    let model = forced_vi_models::models::StiffVanDerPol::VERY_STIFF;
     for (h, levels) in [(100.0, 0), (1000.0, 6)] {
         let run = Integrator::new(&model, Scheme::midpoint(), h)
             .unwrap()

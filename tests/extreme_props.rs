@@ -8,7 +8,7 @@
 
 use forced_vi::prelude::*;
 use forced_vi::{RunFailure, SchemeId};
-use forced_vi_scenes::models::{CoupledVanDerPol, StiffVanDerPol};
+use forced_vi_models::models::{CoupledVanDerPol, StiffVanDerPol};
 use proptest::prelude::*;
 use proptest::test_runner::Config;
 

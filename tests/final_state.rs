@@ -3,7 +3,7 @@
 
 use forced_vi::prelude::*;
 use forced_vi::Error;
-use forced_vi_scenes::models::{CoupledVanDerPol, DoublePendulumFriction};
+use forced_vi_models::models::{CoupledVanDerPol, DoublePendulumFriction};
 
 #[test]
 fn final_state_matches_the_full_run() {

@@ -6,7 +6,7 @@
 use forced_vi::model::general;
 use forced_vi::prelude::*;
 use forced_vi::{doubled, NodeJacobian, Structure};
-use forced_vi_scenes::models::{
+use forced_vi_models::models::{
     CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, KeplerDrag, OverdampedOscillator,
     SpringChain, StiffVanDerPol,
 };

@@ -1,5 +1,5 @@
 //! The sparse step (DESIGN §9) on the hand-written FPU chain and membrane of
-//! `forced_vi_scenes::large`: agreement with the dense path, the kernels against the dense
+//! `forced_vi_models::large`: agreement with the dense path, the kernels against the dense
 //! node blocks, large n on a small stack, typed errors, no allocation per step, orders.
 //! `cargo test --release --test sparse`.
 
@@ -11,7 +11,7 @@ use forced_vi::sparse::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use forced_vi::{
     Error, ForcedLagrangian, InitialState, Integrator, LinearPath, Scalar, Scheme, Trajectory,
 };
-use forced_vi_scenes::large::{FpuChain, Lattice2d};
+use forced_vi_models::large::{FpuChain, Lattice2d};
 use nalgebra::SVector;
 
 /// [`System`], counting each thread's allocations (the test harness's own thread allocates

@@ -7,7 +7,7 @@
 use forced_vi::model::general;
 use forced_vi::prelude::*;
 use forced_vi::sparse::{NodeBlocks, NodePattern, NodeSink};
-use forced_vi_scenes::models::SpringChain;
+use forced_vi_models::models::SpringChain;
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
 

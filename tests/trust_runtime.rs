@@ -186,7 +186,7 @@ fn trust_large_hand_written_models_run_on_a_small_stack() {
 
 #[test]
 fn trust_large_macro_models_run_on_a_small_stack() {
-    use forced_vi_scenes::models::SpringChain;
+    use forced_vi_models::models::SpringChain;
     fn run<const N: usize>() -> Result<(), String> {
         let model = SpringChain::<N> {
             m: 1.0,

@@ -1,7 +1,7 @@
 //! Compile-time checks of `#[forced_lagrangian]`: every `tests/ui/<mistake>.rs` (at the
 //! workspace root) must fail to compile with the committed `.stderr`. Bless new output with
 //! `TRYBUILD=overwrite`. The `tests/ui/pass-*.rs` cases, which must compile under
-//! `#![deny(warnings)]`, are test targets of the root package (see its `Cargo.toml`): with
+//! `#![deny(warnings)]`, are test targets of `models/` (see its `Cargo.toml`): with
 //! failing cases only, trybuild checks instead of building, so its dependencies are not
 //! compiled a second time with code generation.
 //!

@@ -26,7 +26,7 @@ fn splits(args: TokenStream) -> bool {
 #[test]
 fn index_sums_split() {
     let kinetic_for_nested = quote!((0..N).map(|i| q_dot[i] * q_dot[i]).sum());
-    // The spring chain of `src/models.rs`, with guarded neighbours.
+    // The spring chain of `models/src/models.rs`, with guarded neighbours.
     assert!(splits(quote!(
         coordinates(q: [f64; N]),
         lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
