@@ -4,8 +4,10 @@
 //! `n` runs over a log-spaced range between `h = min(1, T)` and `h = 5·10⁻⁵` (the paper's
 //! range). A sweep goes from large to small `h` and stops early when more points cannot change
 //! the picture: after [`Plan::floor_points`] consecutive points at the round-off floor
-//! (see [`crate::report::orders::FLOOR`]), or when one run takes longer than
-//! [`Plan::max_run_seconds`]. The paper's own scene, `coupled_van_der_pol`, is always swept to
+//! (see [`crate::report::orders::FLOOR`]), when one run takes longer than
+//! [`Plan::max_run_seconds`], or before a variational run predicted to take longer than
+//! [`PREDICTED_RUN_FACTOR`] times that (from the previous point's time: the work goes as `1/h`
+//! with fixed steps, as `tol^(−1/p)` with adaptive steps of order `p`). The paper's own scene, `coupled_van_der_pol`, is always swept to
 //! the end of the range in the full report, to show the flat round-off tails.
 //!
 //! Tolerances for the baselines are `rtol = atol = 10^(−3 − k/2)` (full) or `10^(−3 − 2k)`
@@ -45,6 +47,10 @@ pub struct Plan {
 
 /// Schemes of order 2 (`lobatto2`, `midpoint`) are run adaptively down to this tolerance only.
 pub const ORDER2_TOL_FLOOR: f64 = 1e-9;
+
+/// A sweep of a variational scheme stops before a point predicted to take this many times
+/// [`Plan::max_run_seconds`].
+pub const PREDICTED_RUN_FACTOR: f64 = 4.0;
 
 /// The scene of the energy-balance long run.
 pub const LONG_RUN_SCENE: &str = "coupled_van_der_pol";

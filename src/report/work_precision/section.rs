@@ -9,7 +9,7 @@ use super::long_run::LONG_RUN_REFERENCE_H;
 use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Summary};
 use super::sweep::reference_scale;
 use crate::report::orders::{self, Fit};
-use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE};
+use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
 use crate::report::table::{col, fmt_time, markdown};
 use crate::report::{Method, Options};
 use crate::scenes::Scene;
@@ -169,8 +169,12 @@ fn scenes_and_methods(i: &Inputs<'_>) -> String {
         "\nThe baselines integrate the first-order form `q' = v`, `v' = E⁻¹(L_q + F − C v)` \
          built from the same exact node kernels as the variational schemes, and are checked \
          against the references by tests (`src/baselines.rs`). Sweeps stop early after {} \
-         points at the round-off floor or a run longer than {} s{tail}.\n\n",
-        plan.floor_points, plan.max_run_seconds,
+         points at the round-off floor, after a run longer than {} s, or before a variational run \
+         predicted (from the previous point's time, as `1/h` or `tol^(−1/p)`) to take longer \
+         than {} s{tail}.\n\n",
+        plan.floor_points,
+        plan.max_run_seconds,
+        PREDICTED_RUN_FACTOR * plan.max_run_seconds,
     );
     md
 }

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use super::rows::{Failure, Mode, OrderRow, Row, Spread, Summary};
 use crate::report::orders;
-use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE};
+use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
 use crate::report::study::Study;
 use crate::report::timing;
 use crate::report::Method;
@@ -173,6 +173,18 @@ pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method, mode: Mode) -> Vec<
     }
 }
 
+/// The predicted time of a variational run at `x`, from the previous point `(x0, t0)` (step
+/// size or tolerance, seconds): the work goes as `1/h` with fixed steps and as `tol^(−1/p)`
+/// with adaptive steps of order `p`. `None` for the baselines, whose effective order varies.
+fn predicted_seconds(method: &Method, mode: Mode, (x0, t0): (f64, f64), x: f64) -> Option<f64> {
+    let order = method.scheme()?.order() as f64;
+    let ratio = x0 / x;
+    match mode {
+        Mode::Fixed => Some(t0 * ratio),
+        Mode::Adaptive => Some(t0 * ratio.powf(1.0 / order)),
+    }
+}
+
 /// Sweeps one method over its grid on one scene, stopping early as [`Plan`] says.
 fn sweep(scene: &dyn Scene, method: &Method, mode: Mode, plan: &Plan) -> Swept {
     let scheme = method.scheme();
@@ -183,9 +195,15 @@ fn sweep(scene: &dyn Scene, method: &Method, mode: Mode, plan: &Plan) -> Swept {
         && scene.name() == PAPER_SCENE;
     let mut out = Swept::default();
     let mut floor_run = 0;
+    let mut last: Option<(f64, f64)> = None;
     for x in grid(plan, scene, method, mode) {
+        let too_long = last.and_then(|(x0, t0)| predicted_seconds(method, mode, (x0, t0), x));
+        if !keep_tail && too_long.is_some_and(|t| t > PREDICTED_RUN_FACTOR * plan.max_run_seconds) {
+            break;
+        }
         match measure(scene, (method, mode), scheme.as_ref(), x, plan) {
             Ok((row, first)) => {
+                last = Some((x, first));
                 let e = row.errors();
                 if orders::at_floor(e[0], scale[0]) && orders::at_floor(e[1], scale[1]) {
                     floor_run += 1;
