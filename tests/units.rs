@@ -156,6 +156,28 @@ mod report_plan {
         assert_eq!(p.repeats(1e-6), p.max_repeats);
         assert!(Plan::quick().tolerances.last().unwrap() >= &1e-13);
     }
+
+    #[test]
+    fn sweeps_predict_the_cost_of_the_next_point() {
+        use forced_vi_scenes::report::work_precision::sweep::predicted_seconds;
+        use forced_vi_scenes::report::work_precision::Mode;
+        use forced_vi_scenes::report::Method;
+        let m = |s: &str| s.parse::<Method>().unwrap();
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() <= 1e-12 * b);
+        // Fixed steps: work as 1/h, whatever the order.
+        let fixed = predicted_seconds(&m("lobatto5"), Mode::Fixed, (1e-2, 0.5), 1e-3);
+        assert!(close(fixed, 5.0));
+        // Adaptive: work as tol^(-1/p); midpoint has p = 2, lobatto3 p = 4.
+        let mid = predicted_seconds(&m("midpoint"), Mode::Adaptive, (1e-4, 0.14), 1e-7);
+        assert!(close(mid, 0.14 * 1e3f64.sqrt()));
+        let l3 = predicted_seconds(&m("lobatto3"), Mode::Adaptive, (1e-4, 0.1), 1e-8);
+        assert!(close(l3, 1.0));
+        // The quick plan's cap (4 × 0.25 s) stops the midpoint sweep, not lobatto3's.
+        let cap = PREDICTED_RUN_FACTOR * Plan::quick().max_run_seconds;
+        assert!(mid.unwrap() > cap && l3.unwrap() <= cap);
+        // The baselines' effective order varies: no prediction.
+        assert!(predicted_seconds(&m("bdf"), Mode::Adaptive, (1e-4, 0.1), 1e-8).is_none());
+    }
 }
 
 mod report_style {

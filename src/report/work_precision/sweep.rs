@@ -176,7 +176,7 @@ pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method, mode: Mode) -> Vec<
 /// The predicted time of a variational run at `x`, from the previous point `(x0, t0)` (step
 /// size or tolerance, seconds): the work goes as `1/h` with fixed steps and as `tol^(−1/p)`
 /// with adaptive steps of order `p`. `None` for the baselines, whose effective order varies.
-fn predicted_seconds(method: &Method, mode: Mode, (x0, t0): (f64, f64), x: f64) -> Option<f64> {
+pub fn predicted_seconds(method: &Method, mode: Mode, (x0, t0): (f64, f64), x: f64) -> Option<f64> {
     let order = method.scheme()?.order() as f64;
     let ratio = x0 / x;
     match mode {
