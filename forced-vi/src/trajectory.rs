@@ -49,6 +49,15 @@ pub struct RunStats {
     pub rejected_steps: usize,
 }
 
+impl RunStats {
+    /// Counts an accepted step that took `newton_iterations` iterations.
+    pub(crate) fn count_step(&mut self, newton_iterations: usize) {
+        self.steps += 1;
+        self.newton_iterations += newton_iterations;
+        self.max_newton_iterations = self.max_newton_iterations.max(newton_iterations);
+    }
+}
+
 /// A finished run: every record, initial state first.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Trajectory<const N: usize> {

@@ -153,9 +153,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> SparseStepper<'_, M, N> {
         self.k += 1;
         let t = self.t;
         self.state.t_state = t;
-        self.stats.steps += 1;
-        self.stats.newton_iterations += iters;
-        self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
+        self.stats.count_step(iters);
         if self.lean {
             return Ok(self.record(iters, residual, substeps, false));
         }

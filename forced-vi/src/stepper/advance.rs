@@ -231,9 +231,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let t = self.t;
         // Substeps add up to the step only to round-off: the step's end is exact.
         self.t_state = t;
-        self.stats.steps += 1;
-        self.stats.newton_iterations += iters;
-        self.stats.max_newton_iterations = self.stats.max_newton_iterations.max(iters);
+        self.stats.count_step(iters);
         if self.lean {
             // The state only; the velocity, energy and balance are left out (and checked
             // once at the end, `finish`).
