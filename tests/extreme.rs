@@ -4,6 +4,9 @@
 //! before it returned, or in a finite trajectory. Never a panic, never a NaN reported as a
 //! result.
 
+// `RunFailure` keeps what a run computed before failing, by value.
+#![allow(clippy::result_large_err)]
+
 use forced_vi::prelude::*;
 use forced_vi::{Error, NewtonFailure, NewtonOptions, RunFailure};
 use forced_vi_models::models::CoupledVanDerPol;
@@ -12,10 +15,7 @@ fn cvdp_run(h: f64, t_final: f64, init: InitialState<2>) -> Result<Trajectory<2>
     let model = CoupledVanDerPol::PAPER;
     match Integrator::new(&model, Scheme::lobatto(3).unwrap(), h) {
         Ok(i) => i.run(init, t_final),
-        Err(error) => Err(RunFailure {
-            error,
-            trajectory: Trajectory::default(),
-        }),
+        Err(error) => Err(RunFailure::from(error)),
     }
 }
 

@@ -78,10 +78,7 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     let t_final = h * steps as f64;
     let result = match Integrator::new(model, scheme, h) {
         Ok(i) => i.max_subdivisions(levels).run(init, t_final),
-        Err(error) => Err(RunFailure {
-            error,
-            trajectory: Trajectory::default(),
-        }),
+        Err(error) => Err(RunFailure::from(error)),
     };
     match result {
         Ok(traj) => {

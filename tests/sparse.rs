@@ -324,22 +324,29 @@ fn typed_errors_of_the_sparse_path() {
         "{}",
         failure.error
     );
-    // Adaptive steps are not implemented on the sparse path: a typed error, not a dense run.
+    // Adaptive steps run on the sparse backend too, the same stepper as the dense one: the
+    // two agree to round-off (their linear algebra differs, not their steps).
     let chain = FpuChain::<32>::default();
     let adaptive = Integrator::new(&chain, lob.clone(), 0.01)
         .unwrap()
         .tolerances(1e-8, 1e-8)
         .unwrap();
-    let err = failed(adaptive.run(FpuChain::<32>::initial(), 1.0)).error;
-    assert!(matches!(err, Error::SparsePathUnavailable { .. }), "{err}");
-    let err = adaptive
+    assert_eq!(
+        adaptive.path_for(&FpuChain::<32>::initial()).unwrap(),
+        LinearPath::Sparse
+    );
+    let sparse = adaptive
         .final_state(FpuChain::<32>::initial(), 1.0)
-        .unwrap_err()
-        .error;
-    assert_eq!(err.kind(), "sparse_path_unavailable");
-    // Asked for explicitly, the dense path runs it adaptively.
+        .unwrap();
     let dense = adaptive.clone().linear_path(LinearPath::Dense);
-    assert!(dense.run(FpuChain::<32>::initial(), 0.5).is_ok());
+    let dense = dense.final_state(FpuChain::<32>::initial(), 1.0).unwrap();
+    assert_eq!(sparse.stats.steps, dense.stats.steps);
+    assert!(sparse.stats.steps > 3, "{:?}", sparse.stats);
+    assert!(
+        (sparse.q - dense.q).amax() < 1e-12,
+        "{}",
+        (sparse.q - dense.q).amax()
+    );
     // The sparse path on a model without sparse kernels.
     let plain = Plain;
     let integ = Integrator::new(&plain, lob, 0.01)
@@ -347,7 +354,8 @@ fn typed_errors_of_the_sparse_path() {
         .linear_path(LinearPath::Sparse);
     let init = InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]);
     let err = failed(integ.run(init, 1.0)).error;
-    assert!(matches!(err, Error::SparsePathUnavailable { .. }), "{err}");
+    assert!(matches!(err, Error::NoSparseKernels { .. }), "{err}");
+    assert_eq!(err.kind(), "no_sparse_kernels");
     // Small models keep the dense path under Auto.
     let small = FpuChain::<4>::default();
     let integ = Integrator::new(&small, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
@@ -376,18 +384,40 @@ fn a_sparse_step_allocates_nothing() {
     let _g = serial();
     for s in [2, 3, 5] {
         let model = FpuChain::<256>::default();
-        let integ = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.05).unwrap();
-        let mut stepper = integ
-            .sparse_stepper(FpuChain::<256>::initial(), 10.0)
-            .unwrap();
+        let integ = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.05)
+            .unwrap()
+            .linear_path(LinearPath::Sparse);
+        let mut stepper = integ.stepper(FpuChain::<256>::initial(), 10.0).unwrap();
+        assert_eq!(stepper.path(), LinearPath::Sparse);
         assert_eq!(allocations_in_steps(&mut stepper), 0, "chain, lobatto{s}");
+        // Adaptive steps (step doubling, rejections) allocate nothing either.
+        let adaptive = integ.clone().tolerances(1e-6, 1e-6).unwrap();
+        let mut stepper = adaptive.stepper(FpuChain::<256>::initial(), 10.0).unwrap();
+        assert_eq!(
+            allocations_in_steps(&mut stepper),
+            0,
+            "adaptive chain, lobatto{s}"
+        );
+        // The same stepper on the dense backend.
+        let small = FpuChain::<8>::default();
+        let dense = Integrator::new(&small, Scheme::lobatto(s).unwrap(), 0.05)
+            .unwrap()
+            .linear_path(LinearPath::Dense);
+        let mut stepper = dense.stepper(FpuChain::<8>::initial(), 10.0).unwrap();
+        assert_eq!(stepper.path(), LinearPath::Dense);
+        assert_eq!(
+            allocations_in_steps(&mut stepper),
+            0,
+            "dense chain, lobatto{s}"
+        );
     }
     // The lattice too: a 2-D pattern, whose LU has fill.
     let model = Lattice2d::<16, 256>::default();
     let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.05).unwrap();
     let mut stepper = integ
-        .sparse_stepper(Lattice2d::<16, 256>::initial(), 10.0)
+        .stepper(Lattice2d::<16, 256>::initial(), 10.0)
         .unwrap();
+    assert_eq!(stepper.path(), LinearPath::Sparse);
     assert_eq!(allocations_in_steps(&mut stepper), 0, "lattice");
     // The allocator counts: a run allocates (its buffers, once).
     let before = allocations();

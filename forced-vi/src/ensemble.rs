@@ -36,7 +36,7 @@
 use crate::initial::InitialState;
 use crate::integrator::Integrator;
 use crate::model::ForcedLagrangian;
-use crate::trajectory::{FinalState, RunFailure, StreamFailure, Trajectory};
+use crate::trajectory::{FinalState, RunFailure, Trajectory};
 
 /// Applies `f` to every member, in parallel with the feature `rayon`, and returns the
 /// results in the members' order. The building block of the ensemble runs, public for
@@ -99,7 +99,7 @@ where
         &self,
         members: &[InitialState<N>],
         t_final: f64,
-    ) -> Vec<Result<FinalState<N>, StreamFailure>> {
+    ) -> Vec<Result<FinalState<N>, RunFailure<N>>> {
         map(members, |init| self.final_state(*init, t_final))
     }
 }

@@ -120,12 +120,19 @@ pub enum Error {
         /// Records the run needs.
         records: usize,
     },
-    /// The model's node kernels need more stack than the integrator will provide.
-    #[error("the model's node kernels need {stack_bytes} bytes of stack, more than {max}: the model is too large for the dense dual-number path")]
+    /// The model is too large for the dense backend: more coordinates than
+    /// [`crate::LinearPath::DENSE_MAX_DOF`], or node kernels that need more stack than
+    /// [`crate::MAX_KERNEL_STACK`]. A model with sparse kernels runs on the sparse backend
+    /// instead ([`crate::LinearPath::Auto`] or [`crate::LinearPath::Sparse`]).
+    #[error("the model is too large for the dense path: {dof} coordinates (at most {max_dof}), node kernels needing {stack_bytes} bytes of stack (at most {max}); give it sparse kernels (a model `#[forced_lagrangian]` can split into local terms) and use LinearPath::Auto or Sparse")]
     ModelTooLarge {
+        /// The model's coordinates `N`.
+        dof: usize,
+        /// The dense backend's cap on them.
+        max_dof: usize,
         /// The model's [`crate::ForcedLagrangian::KERNEL_STACK_BYTES`].
         stack_bytes: usize,
-        /// The cap.
+        /// The cap on them.
         max: usize,
     },
     /// A tolerance is negative, not finite, or zero together with its partner.
@@ -218,12 +225,25 @@ pub enum Error {
         /// What went wrong.
         failure: NewtonFailure,
     },
-    /// The sparse path was asked for (or chosen) where it cannot run: the model has no
-    /// sparse node kernels, or the run is adaptive (the sparse path steps with a fixed `h`).
-    #[error("the sparse path cannot run: {reason}")]
-    SparsePathUnavailable {
+    /// [`crate::LinearPath::Sparse`] was asked for, and the model has no sparse node kernels
+    /// (or forced-vi was built without its `sparse` feature).
+    #[error("the sparse backend cannot run this model: {reason}")]
+    NoSparseKernels {
         /// Why.
         reason: &'static str,
+    },
+    /// [`crate::LinearPath::Sparse`] was asked for on a model whose node pattern is too
+    /// dense for sparse storage to pay (see [`crate::LinearPath::SPARSE_FORCED_MAX_DENSITY`]).
+    #[error("the sparse backend refuses a node pattern with {nnz} entries for {n} coordinates: fill {fill:.2} of n², more than {max}")]
+    PatternTooDense {
+        /// Stored entries of the node pattern.
+        nnz: usize,
+        /// Coordinates.
+        n: usize,
+        /// `nnz / n²`.
+        fill: f64,
+        /// The cap on the fill.
+        max: f64,
     },
     /// A scheme could not be built.
     #[error(transparent)]
@@ -252,8 +272,19 @@ impl Error {
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
             Error::NonFiniteModel { .. } => "non_finite_model".into(),
             Error::NewtonFailed { failure, .. } => format!("newton_{}", failure.kind()),
-            Error::SparsePathUnavailable { .. } => "sparse_path_unavailable".into(),
+            Error::NoSparseKernels { .. } => "no_sparse_kernels".into(),
+            Error::PatternTooDense { .. } => "pattern_too_dense".into(),
             Error::Scheme(_) => "invalid_scheme".into(),
+        }
+    }
+}
+
+impl Error {
+    /// The error for sparse node kernels that wrote outside the pattern recorded at their
+    /// first evaluation.
+    pub(crate) fn outside_pattern() -> Error {
+        Error::InvalidModel {
+            message: "the sparse node kernels wrote outside the pattern recorded at the first evaluation (their entries must not depend on the state)".into(),
         }
     }
 }

@@ -5,7 +5,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
-use crate::step_equations::all_finite;
+use crate::scalar::all_finite;
 
 /// Initial data: `(q₀, v₀)` as in the paper, or `(q₀, p₀)`.
 #[derive(Clone, Copy, Debug, PartialEq)]

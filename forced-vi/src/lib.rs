@@ -34,6 +34,10 @@
 //! ```
 #![warn(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+// `RunFailure` carries what a run computed before it failed (records, samples, the last
+// record, the totals) by value, so that `?` and field access stay plain; a failure is the
+// rare path, and its size is a few hundred bytes.
+#![allow(clippy::result_large_err)]
 
 //! # Where things live
 //!
@@ -41,21 +45,24 @@
 //!
 //! | stage | module |
 //! |---|---|
-//! | the model: `L`, `F`, node kernels `(L_q + F, L_v)` and `A, B, C, E` (DESIGN §2) | [`model`], [`scalar`](Scalar) |
+//! | the model: `L`, `F`, node kernels `(L_q + F, L_v)` and `A, B, C, E` (DESIGN §2); sparse node kernels (DESIGN §9) | [`model`], [`scalar`](Scalar) |
 //! | Galley's doubled Lagrangian Λ, for tests and users | [`doubled`] |
 //! | a scheme as coefficients `(d, c, b)`, `Φ`, `Ψ`, the Jacobian terms (DESIGN §3) | [`scheme`] |
-//! | the step equations: residual `G_j` and Jacobian `∂G_j/∂x_m` (DESIGN §3) | `step_equations` |
-//! | Newton's method, knowing nothing of time or schemes | [`newton`] |
+//! | the step equations: residual `G_j` and Jacobian `∂G_j/∂x_m` (DESIGN §3), dense and sparse | `step_equations`, [`sparse`] |
+//! | Newton's method, knowing nothing of time or schemes; dense LU, faer's sparse LU | [`newton`], [`sparse`] |
 //! | initial data, the velocity solve `L_v(q, v) = p`, mass-matrix checks | [`initial`] |
-//! | the stepping loop: predictor, solve, update, subdivision, checks | [`stepper`] |
-//! | records, energy and energy balance (DESIGN §4), run totals, failures | [`trajectory`] |
+//! | the linear algebra of a step behind one trait: the dense and the sparse backend (DESIGN §10) | `backend` |
+//! | the one stepping loop of every model size: predictor, solve, update, subdivision, adaptive steps, checks | [`stepper`] |
+//! | records, energy and energy balance (DESIGN §4), run totals, [`RunFailure`] | [`trajectory`] |
 //! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
-//! | the integrator builder and its run methods | [`integrator`] |
+//! | the integrator builder, the choice of backend ([`LinearPath`]), the run methods | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
-//! | large models: sparse node kernels, the sparse step and its Newton, faer's sparse LU (DESIGN §9) | [`sparse`] |
-//! | the choice of dense or sparse step | [`LinearPath`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
+//!
+//! Data flows one way: model → step equations → Newton and linear algebra → backend →
+//! stepper → integrator → ensemble; no module imports one that imports it.
 
+mod backend;
 pub mod control;
 pub mod doubled;
 pub mod ensemble;
@@ -79,13 +86,8 @@ pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
-#[cfg(feature = "sparse")]
-pub use sparse::SparseStepper;
 pub use stepper::Stepper;
-pub use trajectory::{
-    DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord, StreamFailure,
-    Trajectory,
-};
+pub use trajectory::{DenseState, FinalState, RunFailure, RunStats, StepRecord, Trajectory};
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.
 ///

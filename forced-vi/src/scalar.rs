@@ -16,3 +16,8 @@ impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 pub fn lift<D: Scalar, const N: usize>(x: &[f64; N]) -> [D; N] {
     std::array::from_fn(|i| D::from(x[i]))
 }
+
+/// Whether every entry of a small matrix is finite.
+pub(crate) fn all_finite<const R: usize, const C: usize>(m: &nalgebra::SMatrix<f64, R, C>) -> bool {
+    m.iter().all(|x| x.is_finite())
+}

@@ -7,6 +7,7 @@ use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use crate::error::NewtonFailure;
 use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
 use crate::newton::NonlinearSystem;
+use crate::scalar::all_finite;
 use crate::scheme::Scheme;
 
 /// The nonlinear system of one step, in the increments `Z_j = x_j − q_k` (DESIGN §3).
@@ -53,10 +54,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     }
 }
 
-pub(crate) fn all_finite<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> bool {
-    m.iter().all(|x| x.is_finite())
-}
-
 impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
     fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
         self.nodes(z);
@@ -93,7 +90,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
                 return Err(NewtonFailure::NonFinite);
             }
-            self.jacs[i] = nj;
+            // Filled on the first Jacobian (capacity made once): a zero `N × N` block made
+            // beforehand would sit on the caller's stack.
+            match self.jacs.get_mut(i) {
+                Some(slot) => *slot = nj,
+                None => self.jacs.push(nj),
+            }
         }
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = (sch.stages() - 1) * N;

@@ -5,7 +5,7 @@ use nalgebra::SVector;
 
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
-use crate::step_equations::all_finite;
+use crate::scalar::all_finite;
 
 /// The state after one step, with its diagnostics (DESIGN §4).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -168,41 +168,80 @@ pub(crate) fn hermite<const N: usize>(
     }
 }
 
-/// A sampled run that stopped early: the error and the samples before it.
+/// A run that stopped early, from any run method: the error and everything computed
+/// before it.
+///
+/// [`Integrator::run`](crate::Integrator::run) keeps its records in
+/// [`RunFailure::trajectory`]; [`Integrator::sample`](crate::Integrator::sample) its samples
+/// in [`RunFailure::samples`]; every method the totals (`trajectory.stats`) and the last
+/// record it computed ([`RunFailure::last`]). It converts into the [`Error`], so `?` works
+/// in a function that returns `Result<_, forced_vi::Error>`.
+///
+/// ```
+/// use forced_vi::prelude::*;
+/// # struct Oscillator;
+/// # impl ForcedLagrangian<1> for Oscillator {
+/// #     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+/// #         (v[0] * v[0] - q[0] * q[0]) * 0.5
+/// #     }
+/// # }
+/// fn end(t: f64) -> Result<f64, forced_vi::Error> {
+///     let integ = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?.max_steps(500);
+///     let end = integ.final_state(InitialState::from_velocity([1.0], [0.0]), t)?;
+///     Ok(end.q[0])
+/// }
+/// assert!((end(1.0)? - 1f64.cos()).abs() < 1e-9);
+/// assert!(matches!(end(10.0), Err(forced_vi::Error::TooManySteps { .. })));
+/// # Ok::<(), forced_vi::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{error} ({} samples kept)", samples.len())]
-pub struct SampleFailure<const N: usize> {
-    /// What stopped the run.
-    #[source]
-    pub error: Error,
-    /// The samples at the requested times before the failure.
-    pub samples: Vec<DenseState<N>>,
-}
-
-/// A run that stopped early: the error and everything computed before it.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{error} ({} records kept)", trajectory.records.len())]
+#[error("{error} (after {} steps)", stats.steps)]
 pub struct RunFailure<const N: usize> {
     /// What stopped the run.
     #[source]
     pub error: Error,
-    /// The records up to the failure.
+    /// The records up to the failure (kept by [`Integrator::run`](crate::Integrator::run);
+    /// empty for the other methods), with the totals.
     pub trajectory: Trajectory<N>,
-}
-
-/// A streamed run that stopped early: the error and the totals up to it.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{error} (after {} steps)", stats.steps)]
-pub struct StreamFailure {
-    /// What stopped the run.
-    #[source]
-    pub error: Error,
-    /// The totals up to the failure.
+    /// The totals up to the failure (the same as `trajectory.stats`).
     pub stats: RunStats,
+    /// The last record computed before the failure, if any (boxed: a record holds three
+    /// `N`-vectors).
+    pub last: Option<Box<StepRecord<N>>>,
+    /// The samples before the failure ([`Integrator::sample`](crate::Integrator::sample)).
+    pub samples: Vec<DenseState<N>>,
 }
 
-impl From<StreamFailure> for Error {
-    fn from(f: StreamFailure) -> Error {
+impl<const N: usize> RunFailure<N> {
+    /// A run that failed before its first record.
+    pub(crate) fn new(error: Error) -> Self {
+        Self::after(error, RunStats::default(), None)
+    }
+
+    /// A run that failed after `stats`, its last record being `last`.
+    pub(crate) fn after(error: Error, stats: RunStats, last: Option<Box<StepRecord<N>>>) -> Self {
+        RunFailure {
+            error,
+            trajectory: Trajectory {
+                records: Vec::new(),
+                stats,
+            },
+            stats,
+            last,
+            samples: Vec::new(),
+        }
+    }
+}
+
+/// A run that failed before its first step.
+impl<const N: usize> From<Error> for RunFailure<N> {
+    fn from(error: Error) -> Self {
+        RunFailure::new(error)
+    }
+}
+
+impl<const N: usize> From<RunFailure<N>> for Error {
+    fn from(f: RunFailure<N>) -> Error {
         f.error
     }
 }
@@ -211,11 +250,16 @@ impl From<StreamFailure> for Error {
 pub(crate) fn energy<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     t: f64,
-    q: &SVector<f64, N>,
-    v: &SVector<f64, N>,
-    p: &SVector<f64, N>,
+    q: &[f64],
+    v: &[f64],
+    p: &[f64],
 ) -> Option<f64> {
-    let e = v.dot(p) - model.lagrangian_at::<f64>(t, &(*q).into(), &(*v).into());
+    let (qa, va) = (
+        <&[f64; N]>::try_from(q).ok()?,
+        <&[f64; N]>::try_from(v).ok()?,
+    );
+    let vp: f64 = v.iter().zip(p).map(|(a, b)| a * b).sum();
+    let e = vp - model.lagrangian_at::<f64>(t, qa, va);
     e.is_finite().then_some(e)
 }
 

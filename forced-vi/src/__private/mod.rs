@@ -28,7 +28,7 @@ pub use crate::scalar::{lift, Scalar};
 pub use core::primitive::f64;
 pub use nalgebra::{SMatrix, SVector};
 
-pub use crate::sparse::{Block, NodeSink, SparseNode};
+pub use crate::model::{Block, NodeSink, SparseNode};
 
 pub use dense::*;
 pub use int::*;

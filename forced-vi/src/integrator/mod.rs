@@ -16,40 +16,10 @@ use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
-#[cfg(feature = "sparse")]
-use crate::sparse::SparseStepper;
-use crate::stepper::Stepper;
+use crate::stepper::{RunSetup, Stepper};
 
+pub use crate::stepper::StepOptions;
 pub use path::LinearPath;
-
-/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
-/// [`StepOptions::DEFAULT_MAX_STEPS`] steps.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[non_exhaustive]
-pub struct StepOptions {
-    /// The Newton solver's options.
-    pub newton: NewtonOptions,
-    /// A failed step is retried as 2, 4, …, `2^max_subdivisions` substeps (default 0: off).
-    pub max_subdivisions: u32,
-    /// The most steps a run may take; a longer run is refused before it starts
-    /// ([`Error::TooManySteps`]).
-    pub max_steps: usize,
-}
-
-impl StepOptions {
-    /// The default cap on steps per run: 10⁹.
-    pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
-}
-
-impl Default for StepOptions {
-    fn default() -> Self {
-        StepOptions {
-            newton: NewtonOptions::default(),
-            max_subdivisions: 0,
-            max_steps: Self::DEFAULT_MAX_STEPS,
-        }
-    }
-}
 
 /// The deepest stack the integrator provides for a model's node kernels (4 GiB, mapped
 /// lazily: only the pages the kernels touch use memory).
@@ -113,7 +83,7 @@ impl<M, const N: usize> std::fmt::Debug for Integrator<'_, M, N> {
 
 impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// The most subdivision levels a step may use: 2²⁰ substeps.
-    pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
+    pub const MAX_SUBDIVISION_LEVELS: u32 = StepOptions::MAX_SUBDIVISION_LEVELS;
 
     /// An integrator with step `h`. Defaults: [`StepOptions::default`], fixed steps,
     /// [`LinearPath::Auto`].
@@ -127,7 +97,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             return Err(Error::InvalidStepSize { h });
         }
         if model.sparse_node().is_none() {
-            check_kernel_stack::<M, N>()?;
+            path::check_dense::<M, N>()?;
         }
         model
             .check_parameters()
@@ -219,40 +189,18 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         self.h
     }
 
-    /// The dense path's streaming stepper from `init` to `t_final`: an iterator of records,
-    /// initial state first, that holds only the current state. The run methods choose the
-    /// path by [`LinearPath`]; see [`Self::sparse_stepper`] for the sparse one.
+    /// The streaming stepper from `init` to `t_final`: an iterator of records, initial state
+    /// first, that holds only the current state. It runs on the backend that
+    /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
-        check_kernel_stack::<M, N>()?;
-        Stepper::new(self, init, t_final)
+        let backend = self.backend(&init)?;
+        let setup = RunSetup {
+            model: self.model,
+            scheme: &self.scheme,
+            h: self.h,
+            options: self.options,
+            tolerance: self.tolerance,
+        };
+        Stepper::new(setup, backend, init, t_final)
     }
-
-    /// The sparse path's streaming stepper (DESIGN §9), for a model with sparse kernels.
-    /// Fails with [`Error::SparsePathUnavailable`] without them or with tolerances set.
-    #[cfg(feature = "sparse")]
-    pub fn sparse_stepper(
-        &self,
-        init: InitialState<N>,
-        t_final: f64,
-    ) -> Result<SparseStepper<'_, M, N>, Error> {
-        let node = self
-            .model
-            .sparse_node()
-            .ok_or(Error::SparsePathUnavailable {
-                reason: "the model has no sparse node kernels",
-            })?;
-        let pattern = self.record_pattern(node, &init)?;
-        self.open_sparse(node, pattern, init, t_final)
-    }
-}
-
-/// Refuses a model whose dense kernels need more stack than [`MAX_KERNEL_STACK`].
-fn check_kernel_stack<M: ForcedLagrangian<N>, const N: usize>() -> Result<(), Error> {
-    if M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
-        return Err(Error::ModelTooLarge {
-            stack_bytes: M::KERNEL_STACK_BYTES,
-            max: MAX_KERNEL_STACK,
-        });
-    }
-    Ok(())
 }

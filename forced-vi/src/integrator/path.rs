@@ -1,69 +1,102 @@
-//! The choice of the dense or the sparse step for a run: [`LinearPath`] and the pattern
-//! recorded for the sparse one.
+//! The choice of a run's backend: [`LinearPath`], and the node pattern recorded for the
+//! sparse one.
 
 use super::Integrator;
+use crate::backend::{Backend, DenseBackend};
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
+use crate::MAX_KERNEL_STACK;
 #[cfg(feature = "sparse")]
-use crate::sparse::{record_node_pattern, NodePattern, SparseNode, SparseStepper};
+use crate::{backend::SparseBackend, sparse::record_node_pattern};
 
-/// Which linear algebra a run uses: the dense step with `N × N` node blocks, or the sparse
-/// step of DESIGN §9 on the model's [`SparseNode`] kernels.
+/// Which linear algebra a run uses: the dense backend with `N × N` node blocks, or the
+/// sparse backend of DESIGN §9 on the model's [`SparseNode`](crate::model::SparseNode)
+/// kernels. Both run the same [`Stepper`](crate::Stepper), with fixed or adaptive steps,
+/// and every run method.
 ///
-/// [`LinearPath::Auto`] (the default) takes the sparse path when the model has sparse
+/// [`LinearPath::Auto`] (the default) takes the sparse backend when the model has sparse
 /// kernels ([`ForcedLagrangian::sparse_node`]), at least [`LinearPath::SPARSE_MIN_DOF`]
 /// coordinates, and a node pattern (the union of the blocks `A, B, C, E`, recorded at the
 /// initial state) with at most [`LinearPath::SPARSE_MAX_DENSITY`] `· N²` entries; otherwise
-/// the dense one. The sparse path steps with a fixed `h` only: an adaptive run that would
-/// take it fails with [`Error::SparsePathUnavailable`].
+/// the dense one. The dense backend takes at most [`LinearPath::DENSE_MAX_DOF`]
+/// coordinates: a larger model without sparse kernels is [`Error::ModelTooLarge`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum LinearPath {
     /// By size and density (see above).
     #[default]
     Auto,
-    /// Always the dense step.
+    /// Always the dense backend.
     Dense,
-    /// Always the sparse step; a model without sparse kernels is an error.
+    /// Always the sparse backend; a model without sparse kernels is
+    /// [`Error::NoSparseKernels`], one whose pattern is denser than
+    /// [`LinearPath::SPARSE_FORCED_MAX_DENSITY`] is [`Error::PatternTooDense`].
     Sparse,
 }
 
 impl LinearPath {
-    /// The fewest coordinates for which [`LinearPath::Auto`] takes the sparse path.
+    /// The fewest coordinates for which [`LinearPath::Auto`] takes the sparse backend.
     ///
     /// Measured on the hand-written FPU chain (3 entries per row, lobatto3, release, medians;
     /// `examples/large_chain.rs --crossover`): dense 15.5, 46.5, 256 and 1941 µs per step at
     /// n = 4, 8, 16 and 32, sparse 4.0, 6.0, 10.2 and 21.8 µs. The sparse step wins from
     /// n = 4 against general dense kernels; the macro's specialised dense kernels of small
-    /// models take a few µs, so below n = 8 the dense path is kept.
+    /// models take a few µs, so below n = 8 the dense backend is kept.
     pub const SPARSE_MIN_DOF: usize = 8;
     /// The densest node pattern, as a fraction of `N²`, for which [`LinearPath::Auto`] takes
-    /// the sparse path.
+    /// the sparse backend.
     pub const SPARSE_MAX_DENSITY: f64 = 0.25;
+    /// The densest node pattern, as a fraction of `N²`, that [`LinearPath::Sparse`] accepts
+    /// from [`LinearPath::SPARSE_MIN_DOF`] coordinates on (smaller models are accepted
+    /// whatever their pattern). Denser, sparse storage costs more than the dense backend.
+    pub const SPARSE_FORCED_MAX_DENSITY: f64 = 0.5;
+    /// The most coordinates the dense backend takes. Its step matrix has `((s − 1) N)²`
+    /// entries and its LU `O(((s − 1) N)³)` operations: at `N = 1024`, lobatto3, a 2048²
+    /// matrix (32 MiB) and seconds per factorisation; its node kernels return four `N × N`
+    /// blocks (32 MiB) by value, which the stepper runs on a stack sized for them.
+    pub const DENSE_MAX_DOF: usize = 1024;
 }
 
 impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
-    /// The path a run from `init` takes ([`LinearPath::Dense`] or [`LinearPath::Sparse`]),
-    /// or why it cannot run.
+    /// The backend a run from `init` takes ([`LinearPath::Dense`] or
+    /// [`LinearPath::Sparse`]), or why it cannot run.
     pub fn path_for(&self, init: &InitialState<N>) -> Result<LinearPath, Error> {
-        Ok(match self.choose(init)? {
-            Some(_) => LinearPath::Sparse,
-            None => LinearPath::Dense,
+        Ok(match self.backend(init)? {
+            Backend::Dense(_) => LinearPath::Dense,
+            #[cfg(feature = "sparse")]
+            Backend::Sparse(_) => LinearPath::Sparse,
         })
     }
 
-    /// The sparse kernels and their pattern if the run takes the sparse path.
+    /// The backend of a run from `init`, with its buffers.
+    pub(super) fn backend(&self, init: &InitialState<N>) -> Result<Backend<'_, M, N>, Error> {
+        #[cfg(feature = "sparse")]
+        if let Some(backend) = self.sparse_backend(init)? {
+            return Ok(Backend::Sparse(backend));
+        }
+        #[cfg(not(feature = "sparse"))]
+        if self.linear_path == LinearPath::Sparse {
+            let _ = init;
+            return Err(Error::NoSparseKernels {
+                reason: "forced-vi was built without its `sparse` feature",
+            });
+        }
+        check_dense::<M, N>()?;
+        Ok(Backend::Dense(DenseBackend::new(
+            self.model,
+            &self.scheme,
+            self.options.newton,
+        )))
+    }
+
+    /// The sparse backend if the run takes it.
     #[cfg(feature = "sparse")]
-    pub(super) fn choose(
-        &self,
-        init: &InitialState<N>,
-    ) -> Result<Option<(&'m dyn SparseNode, NodePattern)>, Error> {
-        let node = self.model.sparse_node();
-        let node = match (self.linear_path, node) {
+    fn sparse_backend(&self, init: &InitialState<N>) -> Result<Option<SparseBackend<'_>>, Error> {
+        let node = match (self.linear_path, self.model.sparse_node()) {
             (LinearPath::Dense, _) => return Ok(None),
             (LinearPath::Sparse, None) => {
-                return Err(Error::SparsePathUnavailable {
+                return Err(Error::NoSparseKernels {
                     reason: "the model has no sparse node kernels",
                 })
             }
@@ -71,55 +104,44 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             (LinearPath::Auto, None) => return Ok(None),
             (_, Some(node)) => node,
         };
-        let pattern = self.record_pattern(node, init)?;
-        let dense_enough = pattern.nnz() as f64 > LinearPath::SPARSE_MAX_DENSITY * (N * N) as f64;
-        if self.linear_path == LinearPath::Auto && dense_enough {
-            return Ok(None);
-        }
-        Ok(Some((node, pattern)))
-    }
-
-    /// Without the `sparse` feature every run takes the dense path.
-    #[cfg(not(feature = "sparse"))]
-    pub(super) fn choose(
-        &self,
-        _init: &InitialState<N>,
-    ) -> Result<Option<std::convert::Infallible>, Error> {
+        // The pattern at the initial state (at `v = 0` for initial momenta).
+        let pattern = match init {
+            InitialState::Velocity { q, v } => record_node_pattern(node, 0.0, q, v)?,
+            InitialState::Momentum { q, .. } => record_node_pattern(node, 0.0, q, &vec![0.0; N])?,
+        };
+        let fill = pattern.nnz() as f64 / (N as f64 * N as f64);
         match self.linear_path {
-            LinearPath::Sparse => Err(Error::SparsePathUnavailable {
-                reason: "forced-vi was built without its `sparse` feature",
-            }),
-            LinearPath::Auto | LinearPath::Dense => Ok(None),
+            LinearPath::Auto if fill > LinearPath::SPARSE_MAX_DENSITY => return Ok(None),
+            LinearPath::Sparse
+                if N >= LinearPath::SPARSE_MIN_DOF
+                    && fill > LinearPath::SPARSE_FORCED_MAX_DENSITY =>
+            {
+                return Err(Error::PatternTooDense {
+                    nnz: pattern.nnz(),
+                    n: N,
+                    fill,
+                    max: LinearPath::SPARSE_FORCED_MAX_DENSITY,
+                })
+            }
+            _ => {}
         }
+        let constant_mass = M::STRUCTURE.constant_mass;
+        let newton = self.options.newton;
+        SparseBackend::new(node, &self.scheme, pattern, newton, constant_mass).map(Some)
     }
+}
 
-    /// Records the node pattern at the initial state (at `v = 0` for initial momenta).
-    #[cfg(feature = "sparse")]
-    pub(super) fn record_pattern(
-        &self,
-        node: &dyn SparseNode,
-        init: &InitialState<N>,
-    ) -> Result<NodePattern, Error> {
-        if self.tolerance.is_some() {
-            return Err(Error::SparsePathUnavailable {
-                reason: "adaptive step control is not implemented on the sparse path",
-            });
-        }
-        match init {
-            InitialState::Velocity { q, v } => record_node_pattern(node, 0.0, q, v),
-            InitialState::Momentum { q, .. } => record_node_pattern(node, 0.0, q, &vec![0.0; N]),
-        }
+/// Refuses a model too large for the dense backend: more than
+/// [`LinearPath::DENSE_MAX_DOF`] coordinates, or kernels that need more stack than
+/// [`MAX_KERNEL_STACK`].
+pub(super) fn check_dense<M: ForcedLagrangian<N>, const N: usize>() -> Result<(), Error> {
+    if N > LinearPath::DENSE_MAX_DOF || M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
+        return Err(Error::ModelTooLarge {
+            dof: N,
+            max_dof: LinearPath::DENSE_MAX_DOF,
+            stack_bytes: M::KERNEL_STACK_BYTES,
+            max: MAX_KERNEL_STACK,
+        });
     }
-
-    /// The sparse stepper of a run on the recorded `pattern`.
-    #[cfg(feature = "sparse")]
-    pub(super) fn open_sparse(
-        &self,
-        node: &'m dyn SparseNode,
-        pattern: NodePattern,
-        init: InitialState<N>,
-        t_final: f64,
-    ) -> Result<SparseStepper<'_, M, N>, Error> {
-        SparseStepper::new(self, node, pattern, init, t_final)
-    }
+    Ok(())
 }

@@ -1,68 +1,50 @@
 //! The run methods of an [`Integrator`]: every record collected, streamed, sampled at given
-//! times, or the final state alone; on either path, through one stepper interface.
+//! times, or the final state alone; on either backend, through the one [`Stepper`]. Every
+//! method fails with [`RunFailure`], which keeps what was computed before the failure.
 
 use super::Integrator;
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
-#[cfg(feature = "sparse")]
-use crate::sparse::SparseStepper;
 use crate::stepper::Stepper;
 use crate::trajectory::{
-    hermite, DenseState, FinalState, RunFailure, RunStats, SampleFailure, StepRecord,
-    StreamFailure, Trajectory,
+    hermite, DenseState, FinalState, RunFailure, RunStats, StepRecord, Trajectory,
 };
 
 impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
-    /// Opens the run's stepper on the chosen path and hands it to `visit`.
+    /// Opens the run's stepper and hands it to `visit`; a run that cannot start is a
+    /// failure with nothing computed.
     fn open<R>(
         &self,
         init: InitialState<N>,
         t_final: f64,
-        visit: impl FnOnce(&mut dyn Steps<N>) -> R,
-    ) -> Result<R, Error> {
-        match self.choose(&init)? {
-            #[cfg(feature = "sparse")]
-            Some((node, pattern)) => {
-                let mut s = self.open_sparse(node, pattern, init, t_final)?;
-                Ok(visit(&mut s))
-            }
-            #[cfg(not(feature = "sparse"))]
-            Some(never) => match never {},
-            None => {
-                let mut s = self.stepper(init, t_final)?;
-                Ok(visit(&mut s))
-            }
-        }
+        visit: impl FnOnce(&mut Stepper<'_, M, N>) -> Result<R, RunFailure<N>>,
+    ) -> Result<R, RunFailure<N>> {
+        let mut stepper = self.stepper(init, t_final).map_err(RunFailure::new)?;
+        visit(&mut stepper)
     }
 
     /// Streams every record to `f` and returns the totals. Memory use does not grow with
-    /// the number of steps. On failure the totals up to it come back with the error.
+    /// the number of steps. On failure the totals and the last record come back with the
+    /// error.
     pub fn for_each_step(
         &self,
         init: InitialState<N>,
         t_final: f64,
         mut f: impl FnMut(&StepRecord<N>),
-    ) -> Result<RunStats, StreamFailure> {
-        let streamed = self.open(init, t_final, |stepper| {
-            while let Some(rec) = Iterator::next(stepper) {
+    ) -> Result<RunStats, RunFailure<N>> {
+        self.open(init, t_final, |stepper| {
+            let mut last = None;
+            while let Some(rec) = stepper.next() {
                 match rec {
-                    Ok(r) => f(&r),
-                    Err(error) => {
-                        return Err(StreamFailure {
-                            error,
-                            stats: stepper.stats(),
-                        })
+                    Ok(r) => {
+                        f(&r);
+                        last = Some(Box::new(r));
                     }
+                    Err(error) => return Err(RunFailure::after(error, stepper.stats(), last)),
                 }
             }
             Ok(stepper.stats())
-        });
-        streamed.unwrap_or_else(|error| {
-            Err(StreamFailure {
-                error,
-                stats: RunStats::default(),
-            })
         })
     }
 
@@ -74,17 +56,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         &self,
         init: InitialState<N>,
         t_final: f64,
-    ) -> Result<FinalState<N>, StreamFailure> {
-        let fail = |error, stats| StreamFailure { error, stats };
-        let finished = self.open(init, t_final, |stepper| {
+    ) -> Result<FinalState<N>, RunFailure<N>> {
+        self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
-            while let Some(rec) = Iterator::next(stepper) {
-                if let Err(e) = rec {
-                    return Err(fail(e, stepper.stats()));
+            let mut last = None;
+            while let Some(rec) = stepper.next() {
+                match rec {
+                    Ok(r) => last = Some(Box::new(r)),
+                    Err(e) => return Err(RunFailure::after(e, stepper.stats(), last)),
                 }
             }
             let stats = stepper.stats();
-            let end = stepper.finish().map_err(|e| fail(e, stats))?;
+            let end = stepper
+                .finish()
+                .map_err(|e| RunFailure::after(e, stats, last))?;
             Ok(FinalState {
                 t: end.t,
                 q: end.q,
@@ -93,35 +78,37 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
                 energy: end.energy,
                 stats,
             })
-        });
-        finished.unwrap_or_else(|e| Err(fail(e, RunStats::default())))
+        })
     }
 
     /// Runs to the last of `times` and returns the dense output at each of them (see
     /// [`DenseState`]), so that the step grid, fixed or adaptive, is free of the output grid.
     /// Only the last step is held, so memory grows with the samples, not the steps. The
-    /// times must be finite, non-negative and non-decreasing.
+    /// times must be finite, non-negative and non-decreasing. On failure the samples before
+    /// it come back with the error ([`RunFailure::samples`]).
     pub fn sample(
         &self,
         init: InitialState<N>,
         times: &[f64],
-    ) -> Result<Vec<DenseState<N>>, SampleFailure<N>> {
-        let fail = |error, samples| SampleFailure { error, samples };
-        let ordered = times.windows(2).all(|w| w[0] <= w[1]);
+    ) -> Result<Vec<DenseState<N>>, RunFailure<N>> {
         if let Some(&t) = times.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
-            return Err(fail(Error::InvalidFinalTime { t_final: t }, Vec::new()));
+            return Err(RunFailure::new(Error::InvalidFinalTime { t_final: t }));
         }
-        if !ordered {
-            return Err(fail(Error::UnorderedTimes, Vec::new()));
+        if !times.windows(2).all(|w| w[0] <= w[1]) {
+            return Err(RunFailure::new(Error::UnorderedTimes));
         }
         let t_final = times.last().copied().unwrap_or(0.0);
-        let sampled = self.open(init, t_final, |stepper| {
+        self.open(init, t_final, |stepper| {
             let mut out = Vec::with_capacity(times.len());
             let mut prev: Option<StepRecord<N>> = None;
-            while let Some(rec) = Iterator::next(stepper) {
+            while let Some(rec) = stepper.next() {
                 let rec = match rec {
                     Ok(r) => r,
-                    Err(e) => return Err(fail(e, out)),
+                    Err(e) => {
+                        let mut failure = RunFailure::after(e, stepper.stats(), prev.map(Box::new));
+                        failure.samples = out;
+                        return Err(failure);
+                    }
                 };
                 while let Some(&t) = times.get(out.len()).filter(|&&t| t <= rec.t) {
                     out.push(match &prev {
@@ -132,103 +119,63 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
                 prev = Some(rec);
             }
             Ok(out)
-        });
-        sampled.unwrap_or_else(|e| Err(fail(e, Vec::new())))
+        })
     }
 
     /// Runs to `t_final` and collects every record. On failure the records computed so far
     /// come back with the error.
     pub fn run(&self, init: InitialState<N>, t_final: f64) -> Result<Trajectory<N>, RunFailure<N>> {
         let adaptive = self.tolerance.is_some();
-        let collected = self.open(init, t_final, |stepper| collect(stepper, adaptive));
-        collected.unwrap_or_else(|error| {
-            Err(RunFailure {
-                error,
-                trajectory: Trajectory::default(),
-            })
-        })
+        self.open(init, t_final, |stepper| collect(stepper, adaptive))
     }
 }
 
 /// Collects a run's records. A fixed-step run reserves all its records up front, so that a
 /// run that cannot hold them fails before its first step rather than aborting in the
 /// middle; an adaptive one grows its storage fallibly.
-fn collect<const N: usize>(
-    stepper: &mut dyn Steps<N>,
+fn collect<M: ForcedLagrangian<N>, const N: usize>(
+    stepper: &mut Stepper<'_, M, N>,
     adaptive: bool,
 ) -> Result<Trajectory<N>, RunFailure<N>> {
     let mut traj = Trajectory::default();
     let records = stepper.total_steps().saturating_add(1);
     let reserve = if adaptive { records.min(1024) } else { records };
-    if traj.records.try_reserve_exact(reserve).is_err() {
-        return Err(RunFailure {
-            error: Error::TooManyRecords { records },
+    let fail = |error, mut traj: Trajectory<N>, stats| {
+        traj.stats = stats;
+        let last = traj.records.last().map(|r| Box::new(*r));
+        RunFailure {
+            error,
+            stats,
             trajectory: traj,
-        });
+            last,
+            samples: Vec::new(),
+        }
+    };
+    if traj.records.try_reserve_exact(reserve).is_err() {
+        return Err(fail(
+            Error::TooManyRecords { records },
+            traj,
+            stepper.stats(),
+        ));
     }
-    while let Some(rec) = Iterator::next(stepper) {
+    while let Some(rec) = stepper.next() {
         match rec {
             Ok(r) => {
                 if traj.records.len() == traj.records.capacity()
                     && traj.records.try_reserve(traj.records.len()).is_err()
                 {
-                    traj.stats = stepper.stats();
                     let records = traj.records.len() * 2;
-                    return Err(RunFailure {
-                        error: Error::TooManyRecords { records },
-                        trajectory: traj,
-                    });
+                    return Err(fail(
+                        Error::TooManyRecords { records },
+                        traj,
+                        stepper.stats(),
+                    ));
                 }
                 traj.records.push(r)
             }
-            Err(error) => {
-                traj.stats = stepper.stats();
-                return Err(RunFailure {
-                    error,
-                    trajectory: traj,
-                });
-            }
+            Err(error) => return Err(fail(error, traj, stepper.stats())),
         }
     }
     traj.stats = stepper.stats();
     Ok(traj)
-}
-
-/// A run's stepper on either path, as the run methods drive it.
-trait Steps<const N: usize>: Iterator<Item = Result<StepRecord<N>, Error>> {
-    fn stats(&self) -> RunStats;
-    fn total_steps(&self) -> usize;
-    fn set_lean(&mut self, lean: bool);
-    fn finish(&mut self) -> Result<StepRecord<N>, Error>;
-}
-
-impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for Stepper<'_, M, N> {
-    fn stats(&self) -> RunStats {
-        Stepper::stats(self)
-    }
-    fn total_steps(&self) -> usize {
-        Stepper::total_steps(self)
-    }
-    fn set_lean(&mut self, lean: bool) {
-        Stepper::set_lean(self, lean)
-    }
-    fn finish(&mut self) -> Result<StepRecord<N>, Error> {
-        Stepper::finish(self)
-    }
-}
-
-#[cfg(feature = "sparse")]
-impl<M: ForcedLagrangian<N>, const N: usize> Steps<N> for SparseStepper<'_, M, N> {
-    fn stats(&self) -> RunStats {
-        SparseStepper::stats(self)
-    }
-    fn total_steps(&self) -> usize {
-        SparseStepper::total_steps(self)
-    }
-    fn set_lean(&mut self, lean: bool) {
-        SparseStepper::set_lean(self, lean)
-    }
-    fn finish(&mut self) -> Result<StepRecord<N>, Error> {
-        SparseStepper::finish(self)
-    }
 }

@@ -4,9 +4,9 @@
 //! ([`Scheme`], [`Scheme::jacobian_terms`]); only the storage differs.
 
 use crate::error::NewtonFailure;
+use crate::model::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::scheme::Scheme;
 use crate::sparse::newton::SparseSystem;
-use crate::sparse::node::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::sparse::pattern::StepPattern;
 
 /// The nonlinear system of one sparse step. Vectors of unknowns and residuals are
@@ -108,14 +108,6 @@ impl<'a> SparseStep<'a> {
             }
         }
         Ok(())
-    }
-
-    /// `Σ_j G_j = h Σ_i b_i (L_q + F)_i` for coordinate `a`: the momentum increment.
-    pub(crate) fn momentum_increment(&self, a: usize) -> f64 {
-        let (sch, n) = (self.scheme, self.n);
-        (0..sch.quadrature_nodes())
-            .map(|i| self.h * sch.b()[i] * self.fq[i * n + a])
-            .sum()
     }
 }
 

@@ -1,11 +1,45 @@
-//! A square sparse matrix on a fixed pattern, with faer's sparse LU: the symbolic analysis
-//! (a fill-reducing column order) is done once, when the pattern is made; each numeric
-//! factorisation reuses it and the workspace made with it.
+//! A square sparse matrix on a fixed pattern and its LU factors, with no allocation per
+//! factorisation once the matrix is made.
+//!
+//! faer's sparse LU with partial pivoting finds the structure of its factors while it factors
+//! (the pivots decide the fill). Its supernodal numeric phase allocates as it goes: each call
+//! collects a fresh list of contribution blocks and, per supernode, allocates the block, its
+//! column list and its activity marks (337 allocations per factorisation of a 32 × 32
+//! lattice's lobatto3 step matrix, about 1300 at 64 × 64). Its simplicial phase keeps its
+//! storage but is 4 to 7 times slower on 2-D patterns, and no warm-up or option removes the
+//! supernodal allocations.
+//!
+//! So the numeric factorisation here is our own, on a structure fixed by the analysis: the
+//! pattern of `A + Aᵀ` is ordered by faer's AMD and split into supernodes by faer's symbolic
+//! Cholesky, whose `L` holds the structure of `L` and of `Uᵀ` when rows are exchanged only
+//! inside a supernode's diagonal block. A supernode is one panel, its diagonal block and the
+//! rows of `U` right of it, factored by one call of faer's dense LU with partial pivoting,
+//! and the columns of `L` below it; the updates from earlier supernodes are dense products
+//! gathered left-looking, in buffers sized by the analysis.
+//!
+//! Pivots restricted to the diagonal blocks can grow the factors where partial pivoting would
+//! not. The singularity probe (a solve of `A x = 1`) measures it: a probe whose backward
+//! error exceeds [`MAX_BACKWARD_ERROR`], or a zero pivot, sends the factorisation to faer's
+//! sparse LU with full partial pivoting (which allocates), and the next few factorisations
+//! too (see [`SparseLu::factor`]). The step matrices of the schemes (mass over `h` in each
+//! coordinate's dense diagonal block) have not needed it, soft or stiff (`h² k / m` from
+//! `10⁻⁴` to `100` on the 2-D lattice).
+//!
+//! After [`SparseLu::new`], `factor` and `solve_in_place` allocate nothing (but for the first
+//! factorisation on another thread, where faer's dense kernels may set up a buffer) unless
+//! faer's LU is needed.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::factor::{lu_in_place, lu_in_place_scratch};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
+};
 use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
+use faer::sparse::linalg::{SupernodalThreshold, SymbolicSupernodalParams};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Par};
+use faer::{Accum, Conj, MatMut, MatRef, Par, Side};
 
 use crate::error::NewtonFailure;
 
@@ -17,21 +51,45 @@ pub(crate) struct SparseLu {
     row_idx: Vec<usize>,
     /// The values, one per stored entry, in the order of `row_idx`.
     pub(crate) values: Vec<f64>,
-    symbolic: SymbolicLu<usize>,
-    numeric: NumericLu<usize, f64>,
-    mem: MemBuffer,
-    factored: bool,
-    /// Scratch for the singularity probe.
+    /// The factorisation on the fixed structure (`None` if the analysis could not make one).
+    supernodal: Option<Supernodal>,
+    /// faer's LU with partial pivoting, made when first needed.
+    general: Option<Box<General>>,
+    /// Which factors hold the current values.
+    factors: Factors,
+    /// Factorisations left to faer before the supernodal one is tried again, and the length
+    /// of the last such wait.
+    skip: u32,
+    backoff: u32,
+    /// Scratch for the singularity probe: its solution, residual and `|A| |x|`.
     probe: Vec<f64>,
+    residual: Vec<f64>,
+    scale: Vec<f64>,
 }
 
-/// Factorisations of pseudo-random values made when the matrix is created (see
-/// [`SparseLu::warm_up`]).
-const WARM_UP_FACTORISATIONS: usize = 3;
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Factors {
+    None,
+    Supernodal,
+    General,
+}
 
 /// A factored matrix whose condition is at least this is singular to working precision (the
 /// dense LU's pivot test, a pivot below `10⁻³ ε` of its row, in terms of the condition).
 const MAX_CONDITION: f64 = 1e3 / f64::EPSILON;
+
+/// The largest backward error of the probe solve, `‖1 − A x‖∞ / (‖|A| |x|‖∞ + 1)`, for
+/// which the supernodal factors are kept (about `5·10³ ε`; a stable LU gives `ε` to
+/// `100 ε`).
+const MAX_BACKWARD_ERROR: f64 = 1e-12;
+
+/// The longest run of factorisations left to faer after the supernodal one was declined.
+const MAX_BACKOFF: u32 = 64;
+
+/// The supernode amalgamation: two supernodes of `n` columns in all merge when their
+/// explicit zeros would be less than the given fraction (faer's default merges up to 80 %
+/// zeros at 16 columns, which slows banded patterns by a quarter).
+const RELAX: &[(usize, f64)] = &[(4, 1.0), (16, 0.2), (48, 0.05)];
 
 /// Why a pattern could not be analysed.
 #[derive(Debug)]
@@ -56,48 +114,44 @@ impl SparseLu {
         if !valid {
             return Err(AnalysisFailed);
         }
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-        let symbolic =
-            factorize_symbolic_lu(pattern, Default::default()).map_err(|_| AnalysisFailed)?;
-        let req = StackReq::any_of(&[
-            symbolic.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-        ]);
-        let mem = MemBuffer::try_new(req).map_err(|_| AnalysisFailed)?;
+        let supernodal = Supernodal::new(n, &col_ptr, &row_idx);
+        let general = match supernodal {
+            Some(_) => None,
+            None => Some(Box::new(General::new(n, &col_ptr, &row_idx)?)),
+        };
         let nnz = row_idx.len();
         let mut lu = SparseLu {
             n,
             col_ptr,
             row_idx,
             values: vec![0.0; nnz],
-            symbolic,
-            numeric: NumericLu::new(),
-            mem,
-            factored: false,
-            probe: vec![1.0; n],
+            supernodal,
+            general,
+            factors: Factors::None,
+            skip: 0,
+            backoff: 0,
+            probe: vec![0.0; n],
+            residual: vec![0.0; n],
+            scale: vec![0.0; n],
         };
         lu.warm_up();
         Ok(lu)
     }
 
-    /// Grows the factors' storage before the run. faer sizes `L` and `U` as it factors, and
-    /// partial pivoting can change their fill from one factorisation to the next; a few
-    /// factorisations of pseudo-random values on the pattern (pivots far from the physical
-    /// ones, so more fill) leave room for what the steps need, so that they do not allocate.
+    /// Factors and solves once (the identity on the pattern's diagonal) before the run: the
+    /// dense kernels may set up buffers of their own on their first call.
     fn warm_up(&mut self) {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        for _ in 0..WARM_UP_FACTORISATIONS {
-            for v in self.values.iter_mut() {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                *v = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+        for c in 0..self.n {
+            let rows = &self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]];
+            if let Ok(k) = rows.binary_search(&c) {
+                self.values[self.col_ptr[c] + k] = 1.0;
             }
-            // A failure here (a structurally singular pattern) shows again on the real values.
-            let _ = self.factor();
         }
+        // A failure here (a diagonal outside the pattern) shows again on the real values.
+        let _ = self.factor();
         self.values.fill(0.0);
-        self.factored = false;
+        self.factors = Factors::None;
+        (self.skip, self.backoff) = (0, 0);
     }
 
     /// The order of the matrix.
@@ -111,19 +165,145 @@ impl SparseLu {
     }
 
     /// Factors the current values (numeric phase only).
+    ///
+    /// The supernodal factorisation is tried first; when it is declined (a zero pivot, an
+    /// inaccurate probe, or a probe that finds the matrix singular), faer's LU factors these
+    /// values and the next 1, 2, 4, … (up to [`MAX_BACKOFF`]) factorisations, so that a
+    /// matrix that needs partial pivoting does not pay for both each time.
     pub(crate) fn factor(&mut self) -> Result<(), NewtonFailure> {
-        self.factored = false;
+        self.factors = Factors::None;
         if self.values.iter().any(|x| !x.is_finite()) {
             return Err(NewtonFailure::NonFinite);
         }
-        let pattern = SymbolicSparseColMatRef::new_checked(
-            self.n,
-            self.n,
-            &self.col_ptr,
-            None,
-            &self.row_idx,
-        );
-        let a = SparseColMatRef::new(pattern, &self.values);
+        if self.skip > 0 {
+            self.skip -= 1;
+        } else if let Some(sn) = &mut self.supernodal {
+            if sn.factor(&self.values) {
+                self.factors = Factors::Supernodal;
+                let size = self.probe_solve();
+                // A singular verdict is faer's to give, as before.
+                if size.is_finite()
+                    && self.probe_backward_error() <= MAX_BACKWARD_ERROR
+                    && self.condition_test(size).is_ok()
+                {
+                    self.backoff = 0;
+                    return Ok(());
+                }
+            }
+            self.backoff = (2 * self.backoff).clamp(1, MAX_BACKOFF);
+            self.skip = self.backoff;
+        }
+        if self.general.is_none() {
+            let general = General::new(self.n, &self.col_ptr, &self.row_idx)
+                .map_err(|_| NewtonFailure::SingularJacobian)?;
+            self.general = Some(Box::new(general));
+        }
+        let Some(general) = self.general.as_mut() else {
+            return Err(NewtonFailure::SingularJacobian);
+        };
+        general.factor(self.n, &self.col_ptr, &self.row_idx, &self.values)?;
+        self.factors = Factors::General;
+        let size = self.probe_solve();
+        self.condition_test(size)
+    }
+
+    /// Solves `A x = 1` into `probe` with the current factors; returns `‖x‖∞` (infinite if
+    /// `x` has a NaN).
+    fn probe_solve(&mut self) -> f64 {
+        let mut probe = std::mem::take(&mut self.probe);
+        probe.fill(1.0);
+        self.solve_in_place(&mut probe);
+        self.probe = probe;
+        self.probe.iter().fold(0.0f64, |m, x| {
+            if x.is_nan() {
+                f64::INFINITY
+            } else {
+                m.max(x.abs())
+            }
+        })
+    }
+
+    /// `‖1 − A x‖∞ / (‖|A| |x|‖∞ + 1)` for the probe's solution `x`.
+    fn probe_backward_error(&mut self) -> f64 {
+        self.residual.fill(1.0);
+        self.scale.fill(0.0);
+        for (c, &x) in self.probe.iter().enumerate() {
+            let range = self.col_ptr[c]..self.col_ptr[c + 1];
+            for (&r, &a) in self.row_idx[range.clone()].iter().zip(&self.values[range]) {
+                self.residual[r] -= a * x;
+                self.scale[r] += (a * x).abs();
+            }
+        }
+        let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let error = max(&self.residual) / (max(&self.scale) + 1.0);
+        if error.is_nan() {
+            f64::INFINITY
+        } else {
+            error
+        }
+    }
+
+    /// A zero pivot may come through (faer takes one as it comes); the probe finds it (and a
+    /// pivot negligible against the matrix, as the dense LU's test does): `|A| |A⁻¹ 1|`
+    /// bounds the condition number from below.
+    fn condition_test(&mut self, probe_size: f64) -> Result<(), NewtonFailure> {
+        let condition = probe_size * self.max_abs();
+        if condition.is_nan() || condition >= MAX_CONDITION {
+            self.factors = Factors::None;
+            return Err(NewtonFailure::SingularJacobian);
+        }
+        Ok(())
+    }
+
+    /// Solves `A x = b` in place with the last factors; without factors, `x` becomes NaN
+    /// (a caller's defect, which the solvers report as a non-finite step).
+    pub(crate) fn solve_in_place(&mut self, x: &mut [f64]) {
+        if x.len() != self.n {
+            x.iter_mut().for_each(|v| *v = f64::NAN);
+            return;
+        }
+        match (self.factors, &mut self.supernodal, &mut self.general) {
+            (Factors::Supernodal, Some(sn), _) => sn.solve_in_place(x),
+            (Factors::General, _, Some(general)) => general.solve_in_place(x),
+            _ => x.iter_mut().for_each(|v| *v = f64::NAN),
+        }
+    }
+}
+
+/// faer's sparse LU with partial pivoting (column order by COLAMD, structure found as it
+/// factors).
+struct General {
+    symbolic: SymbolicLu<usize>,
+    numeric: NumericLu<usize, f64>,
+    mem: MemBuffer,
+}
+
+impl General {
+    fn new(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> Result<Self, AnalysisFailed> {
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+        let symbolic =
+            factorize_symbolic_lu(pattern, Default::default()).map_err(|_| AnalysisFailed)?;
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+        ]);
+        let mem = MemBuffer::try_new(req).map_err(|_| AnalysisFailed)?;
+        Ok(General {
+            symbolic,
+            numeric: NumericLu::new(),
+            mem,
+        })
+    }
+
+    fn factor(
+        &mut self,
+        n: usize,
+        col_ptr: &[usize],
+        row_idx: &[usize],
+        values: &[f64],
+    ) -> Result<(), NewtonFailure> {
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+        let a = SparseColMatRef::new(pattern, values);
         self.symbolic
             .factorize_numeric_lu(
                 &mut self.numeric,
@@ -133,45 +313,418 @@ impl SparseLu {
                 Default::default(),
             )
             .map_err(|_| NewtonFailure::SingularJacobian)?;
-        self.factored = true;
-        // faer takes a zero pivot as it comes; a solve with a probe right-hand side finds
-        // it (and a pivot negligible against the matrix, as the dense LU's test does):
-        // `|A| |A⁻¹ 1|` bounds the condition number from below.
-        let mut probe = std::mem::take(&mut self.probe);
-        probe.fill(1.0);
-        self.solve_in_place(&mut probe);
-        let size = probe.iter().fold(0.0f64, |m, x| {
-            if x.is_nan() {
-                f64::INFINITY
-            } else {
-                m.max(x.abs())
-            }
-        });
-        self.probe = probe;
-        let condition = size * self.max_abs();
-        if condition.is_nan() || condition >= MAX_CONDITION {
-            self.factored = false;
-            return Err(NewtonFailure::SingularJacobian);
-        }
         Ok(())
     }
 
-    /// Solves `A x = b` in place with the last factors; without factors, `x` becomes NaN
-    /// (a caller's defect, which the solvers report as a non-finite step).
-    pub(crate) fn solve_in_place(&mut self, x: &mut [f64]) {
-        if !self.factored || x.len() != self.n {
-            x.iter_mut().for_each(|v| *v = f64::NAN);
-            return;
-        }
+    fn solve_in_place(&mut self, x: &mut [f64]) {
+        let n = x.len();
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
-        let rhs = MatMut::from_column_major_slice_mut(x, self.n, 1);
+        let rhs = MatMut::from_column_major_slice_mut(x, n, 1);
         lu.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
+    }
+}
+
+/// The supernodal LU of `B = P A Pᵀ` (`B[i, j] = A[perm[i], perm[j]]`) on a fixed structure.
+///
+/// Supernode `s` has the columns `begin[s] .. begin[s + 1]` (`ns` of them) and below them the
+/// rows `rows(s)` (`nr`, sorted, in `B`'s order). Its storage, at `val_ptr[s]`, is the panel
+/// `[L₁₁\U₁₁  U₁₂]` (`ns × (ns + nr)`, column-major), whose columns are the supernode's and
+/// then `rows(s)`, with its rows in pivot order (`piv`), followed by `L₂₁` (`nr × ns`).
+struct Supernodal {
+    perm: Vec<usize>,
+    begin: Vec<usize>,
+    rows_ptr: Vec<usize>,
+    rows: Vec<usize>,
+    val_ptr: Vec<usize>,
+    val: Vec<f64>,
+    /// Where each entry of `A` goes in `val`.
+    dest: Vec<usize>,
+    /// The updates that supernode `t` gathers: `(d, k0, k1)` for each earlier supernode `d`
+    /// whose rows `rows(d)[k0..k1]` are columns of `t`.
+    upd_ptr: Vec<usize>,
+    upd: Vec<(usize, usize, usize)>,
+    /// The pivot order of each supernode's rows (local indices), at the supernode's columns.
+    piv: Vec<usize>,
+    piv_inv: Vec<usize>,
+    /// Position in the current supernode's panel of each of its `rows`.
+    map: Vec<usize>,
+    /// Update products.
+    work: Vec<f64>,
+    /// The solve's vector in `B`'s order, and one supernode's part of it.
+    y: Vec<f64>,
+    tmp: Vec<f64>,
+    /// Scratch of faer's dense LU.
+    mem: MemBuffer,
+}
+
+impl Supernodal {
+    /// The analysis of the pattern; `None` if faer's symbolic Cholesky fails or its structure
+    /// is not the one expected (then faer's LU does every factorisation).
+    fn new(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> Option<Supernodal> {
+        // The upper triangle of the pattern of A + Aᵀ, with the diagonal.
+        let mut pairs: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
+        for c in 0..n {
+            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                pairs.push((r.max(c), r.min(c)));
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut up_ptr = vec![0usize; n + 1];
+        for &(c, _) in &pairs {
+            up_ptr[c + 1] += 1;
+        }
+        for c in 0..n {
+            up_ptr[c + 1] += up_ptr[c];
+        }
+        let up_idx: Vec<usize> = pairs.iter().map(|&(_, r)| r).collect();
+        drop(pairs);
+
+        let (perm, begin, rows_ptr, rows) = if n == 0 {
+            (Vec::new(), vec![0], vec![0], Vec::new())
+        } else {
+            let upper = SymbolicSparseColMatRef::new_checked(n, n, &up_ptr, None, &up_idx);
+            let params = CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                supernodal_params: SymbolicSupernodalParams { relax: Some(RELAX) },
+                ..Default::default()
+            };
+            let symbolic =
+                factorize_symbolic_cholesky(upper, Side::Upper, SymmetricOrdering::Amd, params)
+                    .ok()?;
+            let perm = symbolic.perm()?.arrays().0.to_vec();
+            let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
+                return None;
+            };
+            let mut begin = sn.supernode_begin().to_vec();
+            begin.push(n);
+            let mut rows_ptr = vec![0usize];
+            let mut rows = Vec::new();
+            for s in 0..sn.n_supernodes() {
+                let start = rows.len();
+                rows.extend_from_slice(sn.supernode(s).pattern());
+                rows[start..].sort_unstable();
+                rows_ptr.push(rows.len());
+            }
+            (perm, begin, rows_ptr, rows)
+        };
+        let n_super = begin.len() - 1;
+        let mut super_of = vec![0usize; n];
+        for s in 0..n_super {
+            super_of[begin[s]..begin[s + 1]].fill(s);
+        }
+        let size = |s: usize| (begin[s + 1] - begin[s], rows_ptr[s + 1] - rows_ptr[s]);
+        let rows_of = |s: usize| &rows[rows_ptr[s]..rows_ptr[s + 1]];
+        // Every row below a supernode is after it.
+        if (0..n_super).any(|s| rows_of(s).first().is_some_and(|&r| r < begin[s + 1])) {
+            return None;
+        }
+        let mut val_ptr = vec![0usize; n_super + 1];
+        for s in 0..n_super {
+            let (ns, nr) = size(s);
+            val_ptr[s + 1] = val_ptr[s] + ns * (ns + 2 * nr);
+        }
+
+        // Where each entry of A goes.
+        let mut inv = vec![0usize; n];
+        for (i, &p) in perm.iter().enumerate() {
+            inv[p] = i;
+        }
+        let mut dest = Vec::with_capacity(row_idx.len());
+        for c in 0..n {
+            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                let (bi, bj) = (inv[r], inv[c]);
+                let (si, sj) = (super_of[bi], super_of[bj]);
+                let at = if si == sj {
+                    let (ns, _) = size(si);
+                    val_ptr[si] + (bi - begin[si]) + (bj - begin[si]) * ns
+                } else if bi < bj {
+                    let (ns, _) = size(si);
+                    let k = rows_of(si).binary_search(&bj).ok()?;
+                    val_ptr[si] + (bi - begin[si]) + (ns + k) * ns
+                } else {
+                    let (ns, nr) = size(sj);
+                    let k = rows_of(sj).binary_search(&bi).ok()?;
+                    val_ptr[sj] + ns * (ns + nr) + k + (bj - begin[sj]) * nr
+                };
+                dest.push(at);
+            }
+        }
+
+        // The updates, grouped by the supernode that gathers them; the rows of `d` from
+        // `k0` on must be columns or rows of that supernode.
+        let mut groups = Vec::new();
+        for d in 0..n_super {
+            let r = rows_of(d);
+            let mut k0 = 0;
+            while k0 < r.len() {
+                let t = super_of[r[k0]];
+                let k1 = k0 + r[k0..].partition_point(|&x| x < begin[t + 1]);
+                if r[k1..].iter().any(|x| rows_of(t).binary_search(x).is_err()) {
+                    return None;
+                }
+                groups.push((t, d, k0, k1));
+                k0 = k1;
+            }
+        }
+        let mut upd_ptr = vec![0usize; n_super + 1];
+        for &(t, ..) in &groups {
+            upd_ptr[t + 1] += 1;
+        }
+        for t in 0..n_super {
+            upd_ptr[t + 1] += upd_ptr[t];
+        }
+        let mut next = upd_ptr.clone();
+        let mut upd = vec![(0, 0, 0); groups.len()];
+        let mut work_len = 0;
+        for &(t, d, k0, k1) in &groups {
+            upd[next[t]] = (d, k0, k1);
+            next[t] += 1;
+            let m = size(d).1;
+            work_len = work_len.max((k1 - k0) * (m - k0));
+        }
+        let max_ns = (0..n_super).map(|s| size(s).0).max().unwrap_or(0);
+        let max_nr = (0..n_super).map(|s| size(s).1).max().unwrap_or(0);
+        let req = lu_in_place_scratch::<usize, f64>(
+            max_ns,
+            max_ns + max_nr,
+            Par::Seq,
+            Default::default(),
+        );
+        let mem = MemBuffer::try_new(req).ok()?;
+        Some(Supernodal {
+            perm,
+            begin,
+            rows_ptr,
+            rows,
+            val: vec![0.0; val_ptr[n_super]],
+            val_ptr,
+            dest,
+            upd_ptr,
+            upd,
+            piv: vec![0; n],
+            piv_inv: vec![0; max_ns],
+            map: vec![0; n],
+            work: vec![0.0; work_len],
+            y: vec![0.0; n],
+            tmp: vec![0.0; max_ns],
+            mem,
+        })
+    }
+
+    /// Factors `values` (on `A`'s pattern); `false` at a zero (or non-finite) pivot.
+    fn factor(&mut self, values: &[f64]) -> bool {
+        self.val.fill(0.0);
+        for (&at, &v) in self.dest.iter().zip(values) {
+            self.val[at] = v;
+        }
+        let n_super = self.begin.len() - 1;
+        for s in 0..n_super {
+            let (c0, c1) = (self.begin[s], self.begin[s + 1]);
+            let ns = c1 - c0;
+            let rows_s = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+            let nr = rows_s.len();
+            for (k, &r) in rows_s.iter().enumerate() {
+                self.map[r] = ns + k;
+            }
+            let (done, rest) = self.val.split_at_mut(self.val_ptr[s]);
+            let (panel, l21) =
+                rest[..self.val_ptr[s + 1] - self.val_ptr[s]].split_at_mut(ns * (ns + nr));
+            for &(d, k0, k1) in &self.upd[self.upd_ptr[s]..self.upd_ptr[s + 1]] {
+                let nd = self.begin[d + 1] - self.begin[d];
+                let rows_d = &self.rows[self.rows_ptr[d]..self.rows_ptr[d + 1]];
+                let m = rows_d.len();
+                let storage = &done[self.val_ptr[d]..self.val_ptr[d + 1]];
+                let (u_d, l_d) = storage.split_at(nd * (nd + m));
+                let u_d = MatRef::from_column_major_slice(u_d, nd, nd + m);
+                let l_d = MatRef::from_column_major_slice(l_d, m, nd);
+                let k = k1 - k0;
+                // Rows of the panel: L_d[k0..k1] U_d[:, k0..] (columns: the supernode's, then
+                // its rows).
+                {
+                    let w = &mut self.work[..k * (m - k0)];
+                    matmul(
+                        MatMut::from_column_major_slice_mut(w, k, m - k0),
+                        Accum::Replace,
+                        l_d.subrows(k0, k),
+                        u_d.subcols(nd + k0, m - k0),
+                        1.0,
+                        Par::Seq,
+                    );
+                    for (jj, &cj) in rows_d[k0..].iter().enumerate() {
+                        let col = if cj < c1 { cj - c0 } else { self.map[cj] };
+                        let dst = &mut panel[col * ns..(col + 1) * ns];
+                        for (&ri, &x) in rows_d[k0..k1].iter().zip(&w[jj * k..(jj + 1) * k]) {
+                            dst[ri - c0] -= x;
+                        }
+                    }
+                }
+                // Columns of L₂₁: L_d[k1..] U_d[:, k0..k1].
+                if m > k1 {
+                    let mk = m - k1;
+                    let w = &mut self.work[..mk * k];
+                    matmul(
+                        MatMut::from_column_major_slice_mut(w, mk, k),
+                        Accum::Replace,
+                        l_d.subrows(k1, mk),
+                        u_d.subcols(nd + k0, k),
+                        1.0,
+                        Par::Seq,
+                    );
+                    for (jj, &cj) in rows_d[k0..k1].iter().enumerate() {
+                        let dst = &mut l21[(cj - c0) * nr..(cj - c0 + 1) * nr];
+                        for (&ri, &x) in rows_d[k1..].iter().zip(&w[jj * mk..(jj + 1) * mk]) {
+                            dst[self.map[ri] - ns] -= x;
+                        }
+                    }
+                }
+            }
+            // P [A₁₁ A₁₂] = L₁₁ [U₁₁ U₁₂], pivots from the diagonal block only.
+            lu_in_place(
+                MatMut::from_column_major_slice_mut(panel, ns, ns + nr),
+                &mut self.piv[c0..c1],
+                &mut self.piv_inv[..ns],
+                Par::Seq,
+                MemStack::new(&mut self.mem),
+                Default::default(),
+            );
+            if (0..ns).any(|k| {
+                let p = panel[k + k * ns];
+                p == 0.0 || !p.is_finite()
+            }) {
+                return false;
+            }
+            if nr > 0 {
+                // L₂₁ = A₂₁ U₁₁⁻¹, from U₁₁ᵀ L₂₁ᵀ = A₂₁ᵀ.
+                let u11 = MatRef::from_column_major_slice(&panel[..ns * ns], ns, ns);
+                let l = MatMut::from_column_major_slice_mut(l21, nr, ns);
+                solve_lower_triangular_in_place(u11.transpose(), l.transpose_mut(), Par::Seq);
+            }
+        }
+        true
+    }
+
+    /// Solves with the last factors.
+    fn solve_in_place(&mut self, x: &mut [f64]) {
+        let y = &mut self.y;
+        for (yi, &p) in y.iter_mut().zip(&self.perm) {
+            *yi = x[p];
+        }
+        let n_super = self.begin.len() - 1;
+        // L: P_s on the supernode's part, L₁₁⁻¹, then the rows below take L₂₁'s share.
+        for s in 0..n_super {
+            let (c0, c1) = (self.begin[s], self.begin[s + 1]);
+            let ns = c1 - c0;
+            let rows_s = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+            let nr = rows_s.len();
+            let storage = &self.val[self.val_ptr[s]..self.val_ptr[s + 1]];
+            let (panel, l21) = storage.split_at(ns * (ns + nr));
+            let tmp = &mut self.tmp[..ns];
+            for (t, &p) in tmp.iter_mut().zip(&self.piv[c0..c1]) {
+                *t = y[c0 + p];
+            }
+            for k in 0..ns {
+                let yk = tmp[k];
+                for i in k + 1..ns {
+                    tmp[i] -= panel[i + k * ns] * yk;
+                }
+            }
+            y[c0..c1].copy_from_slice(tmp);
+            for (k, &yk) in tmp.iter().enumerate() {
+                for (&r, &l) in rows_s.iter().zip(&l21[k * nr..(k + 1) * nr]) {
+                    y[r] -= l * yk;
+                }
+            }
+        }
+        // U: the rows below give U₁₂'s share, then U₁₁⁻¹.
+        for s in (0..n_super).rev() {
+            let (c0, c1) = (self.begin[s], self.begin[s + 1]);
+            let ns = c1 - c0;
+            let rows_s = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+            let panel = &self.val[self.val_ptr[s]..self.val_ptr[s] + ns * (ns + rows_s.len())];
+            let (head, tail) = y.split_at_mut(c1);
+            let ys = &mut head[c0..];
+            for (j, &r) in rows_s.iter().enumerate() {
+                let yr = tail[r - c1];
+                for (yi, &u) in ys.iter_mut().zip(&panel[(ns + j) * ns..(ns + j + 1) * ns]) {
+                    *yi -= u * yr;
+                }
+            }
+            for k in (0..ns).rev() {
+                ys[k] /= panel[k + k * ns];
+                let yk = ys[k];
+                for i in 0..k {
+                    ys[i] -= panel[i + k * ns] * yk;
+                }
+            }
+        }
+        for (&yi, &p) in y.iter().zip(&self.perm) {
+            x[p] = yi;
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    /// The unit tests' allocator: [`System`], counting each thread's allocations (tests run
+    /// on threads of their own, so a test counts only its own).
+    struct PerThread;
+
+    thread_local! {
+        static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    }
+
+    fn count() {
+        // `try_with`: the count is lost, not a panic, while the thread is torn down.
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+    }
+
+    // SAFETY: every call is forwarded unchanged to `System`.
+    unsafe impl GlobalAlloc for PerThread {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            count();
+            // SAFETY: the caller upholds `GlobalAlloc::alloc`'s contract.
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+            count();
+            // SAFETY: as above.
+            unsafe { System.alloc_zeroed(layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            count();
+            // SAFETY: as above.
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            // SAFETY: as above.
+            unsafe { System.dealloc(ptr, layout) }
+        }
+    }
+
+    #[global_allocator]
+    static ALLOC: PerThread = PerThread;
+
+    /// Allocations made by this thread so far.
+    fn allocations() -> u64 {
+        ALLOCATIONS.with(|c| c.get())
+    }
+
+    /// `‖A x − b‖∞ / (‖A‖max ‖x‖∞)`.
+    fn relative_residual(lu: &SparseLu, x: &[f64], b: &[f64]) -> f64 {
+        let mut r = b.to_vec();
+        for (c, &xc) in x.iter().enumerate() {
+            for p in lu.col_ptr[c]..lu.col_ptr[c + 1] {
+                r[lu.row_idx[p]] -= lu.values[p] * xc;
+            }
+        }
+        let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        max(&r) / (lu.max_abs() * max(x))
+    }
 
     #[test]
     fn solves_a_tridiagonal_system() {
@@ -190,5 +743,140 @@ mod tests {
         lu.values.fill(0.0);
         assert_eq!(lu.factor(), Err(NewtonFailure::SingularJacobian));
         assert!(SparseLu::new(2, vec![0, 1], vec![0]).is_err());
+        let mut empty = SparseLu::new(0, vec![0], vec![]).unwrap();
+        empty.factor().unwrap();
+        empty.solve_in_place(&mut []);
+    }
+
+    /// The step matrix of lobatto3 (two unknowns per coordinate, `a·2 + j`) on a `w × w`
+    /// lattice whose coordinates are coupled to their 4 neighbours: a dense 2 × 2 block at
+    /// each entry of the lattice's pattern. Returns `(col_ptr, row_idx, (a, b, j, m) per
+    /// entry)`.
+    #[allow(clippy::type_complexity)]
+    fn lattice_step_pattern(
+        w: usize,
+    ) -> (Vec<usize>, Vec<usize>, Vec<(usize, usize, usize, usize)>) {
+        let (mut col_ptr, mut row_idx, mut who) = (vec![0], vec![], vec![]);
+        for b in 0..w * w {
+            let (x, y) = (b % w, b / w);
+            let mut node = vec![b];
+            node.extend((x > 0).then(|| b - 1));
+            node.extend((x + 1 < w).then_some(b + 1));
+            node.extend((y > 0).then(|| b - w));
+            node.extend((y + 1 < w).then_some(b + w));
+            node.sort_unstable();
+            for m in 0..2 {
+                for &a in &node {
+                    for j in 0..2 {
+                        row_idx.push(a * 2 + j);
+                        who.push((a, b, j, m));
+                    }
+                }
+                col_ptr.push(row_idx.len());
+            }
+        }
+        (col_ptr, row_idx, who)
+    }
+
+    /// A lobatto3 step Jacobian's values on the lattice: `(m/h) K` (K the kinetic block of
+    /// the quadratic Lagrange basis) in each coordinate's block, the springs' `h k W` (`W`
+    /// the quadrature weights) on the lattice's Laplacian, a little damping, `k` varying a
+    /// little from site to site and `h` from call to call.
+    fn lattice_step_values(who: &[(usize, usize, usize, usize)], h: f64, k: f64, out: &mut [f64]) {
+        let kinetic = [[16.0 / 3.0, -8.0 / 3.0], [-8.0 / 3.0, 1.0 / 3.0]];
+        let weight = [[2.0 / 3.0, 0.0], [0.0, 1.0 / 6.0]];
+        let damping = [[0.0, 0.05], [-0.05, 0.05]];
+        for (v, &(a, b, j, m)) in out.iter_mut().zip(who) {
+            let k_ab = k * (1.0 + 0.1 * ((3 * a + 7 * b) % 11) as f64);
+            *v = if a == b {
+                kinetic[j][m] / h + 4.0 * h * k_ab * weight[j][m] + damping[j][m]
+            } else {
+                -h * k_ab * weight[j][m]
+            };
+        }
+    }
+
+    #[test]
+    fn a_lattice_step_matrix_factors_accurately_without_allocating() {
+        let w = 32;
+        let (col_ptr, row_idx, who) = lattice_step_pattern(w);
+        let n = 2 * w * w;
+        let before = allocations();
+        let mut lu = SparseLu::new(n, col_ptr, row_idx).unwrap();
+        assert!(allocations() > before, "the allocator counts");
+        let b: Vec<f64> = (0..n)
+            .map(|i| ((i * 37) % 101) as f64 / 50.0 - 1.0)
+            .collect();
+        let mut x = vec![0.0; n];
+        let mut values = vec![0.0; who.len()];
+        // Soft to stiff springs (h²k from 10⁻⁴ to 3), the step size changing too.
+        for (i, k) in [1.0, 1.0, 30.0, 300.0, 300.0, 3000.0, 30000.0]
+            .into_iter()
+            .enumerate()
+        {
+            let h = 0.01 * (1.0 + 0.1 * i as f64);
+            lattice_step_values(&who, h, k, &mut values);
+            lu.values.copy_from_slice(&values);
+            x.copy_from_slice(&b);
+            let before = allocations();
+            lu.factor().unwrap();
+            lu.solve_in_place(&mut x);
+            assert_eq!(allocations() - before, 0, "factorisation {i}");
+            assert_eq!(lu.factors, Factors::Supernodal, "factorisation {i}");
+            let r = relative_residual(&lu, &x, &b);
+            assert!(r < 1e-14, "factorisation {i}: residual {r:e}");
+        }
+    }
+
+    /// `δ I + S` with `S` the cyclic shift (`S e_i = e_{i+1}`): the diagonal blocks of the
+    /// supernodes (parts of the cycle) are `δ I` plus a nilpotent shift, so a pivot `δ` is
+    /// forced on them, while partial pivoting takes the shift's ones.
+    fn shifted_cycle(n: usize, delta: f64) -> SparseLu {
+        let mut col_ptr = vec![0];
+        let mut row_idx = vec![];
+        for c in 0..n {
+            let mut rows = vec![c, (c + 1) % n];
+            rows.sort_unstable();
+            row_idx.extend(rows);
+            col_ptr.push(row_idx.len());
+        }
+        let mut lu = SparseLu::new(n, col_ptr.clone(), row_idx.clone()).unwrap();
+        for c in 0..n {
+            let range = col_ptr[c]..col_ptr[c + 1];
+            for (v, &r) in lu.values[range.clone()].iter_mut().zip(&row_idx[range]) {
+                *v = if r == c { delta } else { 1.0 };
+            }
+        }
+        lu
+    }
+
+    #[test]
+    fn a_matrix_that_needs_partial_pivoting_falls_back_to_faer() {
+        let n = 64;
+        let b: Vec<f64> = (0..n).map(|i| (i % 7) as f64 - 3.0).collect();
+        // A zero pivot in a diagonal block; then a tiny one, whose growth the probe's
+        // backward error shows.
+        for delta in [0.0, 1e-13] {
+            let mut lu = shifted_cycle(n, delta);
+            lu.factor().unwrap();
+            assert_eq!(lu.factors, Factors::General, "δ = {delta}");
+            let mut x = b.clone();
+            lu.solve_in_place(&mut x);
+            let r = relative_residual(&lu, &x, &b);
+            assert!(r < 1e-15, "δ = {delta}: residual {r:e}");
+            // The next factorisation goes to faer directly, the one after that tries again.
+            assert_eq!((lu.skip, lu.backoff), (1, 1));
+            lu.factor().unwrap();
+            assert_eq!((lu.skip, lu.backoff), (0, 1));
+            lu.factor().unwrap();
+            assert_eq!((lu.skip, lu.backoff), (2, 2));
+        }
+        // A regular value for δ: the supernodal factors are kept.
+        let mut lu = shifted_cycle(n, 4.0);
+        lu.factor().unwrap();
+        assert_eq!(lu.factors, Factors::Supernodal);
+        let mut x = b.clone();
+        lu.solve_in_place(&mut x);
+        assert!(relative_residual(&lu, &x, &b) < 1e-15);
     }
 }

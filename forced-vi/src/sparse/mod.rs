@@ -1,41 +1,33 @@
-//! Large models: sparse node kernels and the sparse step (DESIGN §9).
+//! Large models: the sparse linear algebra of a step (DESIGN §9).
 //!
 //! A model whose [`ForcedLagrangian::sparse_node`](crate::ForcedLagrangian::sparse_node)
-//! returns kernels is stepped on sparse storage when it is large and sparse enough (see
+//! returns kernels ([`SparseNode`]) can be stepped on sparse storage (see
 //! [`LinearPath`](crate::LinearPath)): the node pattern is recorded at the first evaluation,
 //! the step Jacobian's pattern and faer's symbolic LU analysis follow from it once per run,
 //! and each step fills, factors and solves on those, with every buffer made once per run.
+//! The stepping loop itself is the one [`Stepper`](crate::Stepper) of every model size; this
+//! module is what its sparse backend is made of.
 //!
 //! | piece | module |
 //! |---|---|
-//! | the kernels' interface: [`SparseNode`], [`NodeSink`], [`NodePattern`] | `node` |
+//! | the kernels' interface: [`SparseNode`], [`NodeSink`], [`NodePattern`] (re-exported from [`crate::model`]) | this one |
 //! | recording the node pattern, the step Jacobian's pattern | `pattern` |
 //! | the step equations (DESIGN §3) on sparse storage | `equations` |
 //! | faer's sparse LU on a fixed pattern | `lu` |
-//! | Newton on a sparse Jacobian | `newton` |
+//! | the Newton iteration's sparse linear solver | `newton` |
 //! | the velocity solve `L_v(q, v) = p` | `velocity` |
-//! | the stepping loop: [`SparseStepper`] | `stepper`, `advance`, `state` |
 
 #[cfg(feature = "sparse")]
-mod advance;
+pub(crate) mod equations;
 #[cfg(feature = "sparse")]
-mod equations;
+pub(crate) mod lu;
 #[cfg(feature = "sparse")]
-mod lu;
+pub(crate) mod newton;
 #[cfg(feature = "sparse")]
-mod newton;
-mod node;
+pub(crate) mod pattern;
 #[cfg(feature = "sparse")]
-mod pattern;
-#[cfg(feature = "sparse")]
-mod state;
-#[cfg(feature = "sparse")]
-mod stepper;
-#[cfg(feature = "sparse")]
-mod velocity;
+pub(crate) mod velocity;
 
-pub use node::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
+pub use crate::model::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
 #[cfg(feature = "sparse")]
 pub(crate) use pattern::record_node_pattern;
-#[cfg(feature = "sparse")]
-pub use stepper::SparseStepper;

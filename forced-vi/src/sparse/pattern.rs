@@ -8,7 +8,7 @@
 //! `(b, m)`, so a chain's step matrix is banded.
 
 use crate::error::Error;
-use crate::sparse::node::{NodePattern, NodeSink, SparseNode};
+use crate::model::{NodePattern, NodeSink, SparseNode};
 
 /// Records the node pattern: one evaluation of `node` at `(t, q, v)` in recording mode.
 ///

@@ -2,8 +2,8 @@
 //! on the mass matrix `E`, factored by faer's sparse LU on the node pattern.
 
 use crate::error::Error;
+use crate::model::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::sparse::lu::SparseLu;
-use crate::sparse::node::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::sparse::pattern::transpose;
 
 /// Buffers of the velocity solve, made once per run.
@@ -84,7 +84,7 @@ impl VelocitySolver {
         let mut sink = NodeSink::values(&mut self.lq_f, &mut self.lv, pattern, &mut self.blocks);
         node.eval(t, q, v, &mut sink);
         if sink.outside() {
-            return Err(outside_pattern());
+            return Err(Error::outside_pattern());
         }
         for (k, &e) in self.blocks.e.iter().enumerate() {
             self.lu.values[self.csc_of[k]] = e;
@@ -175,12 +175,5 @@ impl VelocitySolver {
             t,
             residual: max_norm(&self.r),
         })
-    }
-}
-
-/// The error for a kernel that wrote outside its recorded pattern.
-pub(crate) fn outside_pattern() -> Error {
-    Error::InvalidModel {
-        message: "the sparse node kernels wrote outside the pattern recorded at the first evaluation (their entries must not depend on the state)".into(),
     }
 }

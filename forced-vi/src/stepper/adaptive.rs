@@ -1,11 +1,8 @@
-//! Adaptive steps of the dense stepper: step doubling, accepted when the error norm is at
-//! most one (see [`crate::control`]).
+//! Adaptive steps: step doubling, accepted when the error norm is at most one (see
+//! [`crate::control`]). The same on every backend.
 
-use nalgebra::SVector;
-
-use super::advance::StepFailure;
-use super::state::Snapshot;
 use super::Stepper;
+use crate::backend::StepFailure;
 use crate::control::Tolerance;
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
@@ -16,7 +13,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// one, retried with a smaller step otherwise (see [`crate::control`]).
     pub(super) fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<StepRecord<N>, Error> {
         let t0 = self.t;
-        let snap = self.snapshot();
+        self.saved.copy_from(&self.state);
         let span = self.t_final;
         let h_min = 16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs());
         let mut iters = 0;
@@ -41,13 +38,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     steps: self.options.max_steps,
                 });
             }
-            match self.doubled(h, &snap, &mut iters) {
-                Ok((res, (q1, p1))) => {
+            match self.doubled(h, &mut iters) {
+                Ok(res) => {
                     let err = tol.error_norm(
-                        self.prob.scheme.order(),
+                        self.scheme.order(),
                         span / h,
-                        (&q1, &p1),
-                        (&self.q.sum, &self.p.sum),
+                        (&self.whole.0, &self.whole.1),
+                        (&self.state.q.sum, &self.state.p.sum),
                     );
                     if err <= 1.0 {
                         self.h_next = self.controller.accept(h, err);
@@ -56,30 +53,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     }
                     self.h_next = self.controller.reject(h, err);
                 }
+                Err(StepFailure::OutsidePattern) => {
+                    self.state.copy_from(&self.saved);
+                    return Err(Error::outside_pattern());
+                }
                 Err(f) => {
                     last_failure = Some(f);
                     self.h_next = self.controller.reject(h, f64::INFINITY);
                 }
             }
             self.stats.rejected_steps += 1;
-            self.restore(&snap);
+            self.state.copy_from(&self.saved);
         }
     }
 
     /// A step of `h` and two of `h/2` from the same state; leaves the state after the
-    /// halves and returns their last residual and the whole step's `(q, p)`.
-    #[allow(clippy::type_complexity)]
-    fn doubled(
-        &mut self,
-        h: f64,
-        snap: &Snapshot<N>,
-        iters: &mut usize,
-    ) -> Result<(f64, (SVector<f64, N>, SVector<f64, N>)), StepFailure> {
+    /// halves, the whole step's `(q, p)` in `self.whole`, and returns the halves' last
+    /// residual.
+    fn doubled(&mut self, h: f64, iters: &mut usize) -> Result<f64, StepFailure> {
         self.attempt(h, iters)?;
-        let whole = (self.q.sum, self.p.sum);
-        self.restore(snap);
+        self.whole.0.copy_from_slice(&self.state.q.sum);
+        self.whole.1.copy_from_slice(&self.state.p.sum);
+        self.state.copy_from(&self.saved);
         self.attempt(0.5 * h, iters)?;
-        let res = self.attempt(0.5 * h, iters)?;
-        Ok((res, whole))
+        self.attempt(0.5 * h, iters)
     }
 }

@@ -1,161 +1,108 @@
-//! One step of the dense stepper: the Newton solve of the step equations, the compensated
-//! update of `(q, p)` and of the ledger, the mass check at the step's end, and the
-//! subdivision of a step that fails.
-
-use nalgebra::SVector;
+//! One step: the Newton solve of the step equations, the compensated update of `(q, p)`
+//! and of the ledger, the mass check at the step's end, and the subdivision of a step that
+//! fails.
 
 use super::checks::{newton_error, record_error};
-use super::state::kahan_add;
 use super::Stepper;
+use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
-use crate::initial::{mass_factor, solve_velocity, MIN_MASS_RCOND};
-use crate::integrator::Integrator;
 use crate::model::ForcedLagrangian;
-use crate::newton::NewtonReport;
+use crate::scalar::lift;
 use crate::trajectory::StepRecord;
-
-/// Why one attempt at a step failed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) enum StepFailure {
-    Newton(NewtonFailure),
-    /// The step ended at a singular mass matrix or across one.
-    SingularMass {
-        rcond: f64,
-    },
-}
-
-/// The sums over the quadrature nodes of a solved step.
-struct NodeSums<const N: usize> {
-    /// The momentum update `h Σ_i b_i (L_q + F)_i`.
-    dp: SVector<f64, N>,
-    /// The ledger's increment `h Σ_i b_i (F·v − ∂L/∂t)_i`.
-    dw: f64,
-    /// The largest `|L_q + F|` at a node.
-    fmax: f64,
-}
 
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// One step of size `h` from the current state.
     pub(super) fn advance(&mut self, h: f64) -> Result<(usize, f64), StepFailure> {
-        let rep = self.solve_step(h)?;
-        // The last residual evaluation was at the accepted iterate, so the node gradients in
-        // `prob` belong to the solution.
-        let sums = self.node_sums(h);
-        let s = self.prob.scheme.stages();
-        let dq: SVector<f64, N> = self.z.fixed_rows::<N>((s - 2) * N).into_owned();
-        let vguess = self.end_velocity(h);
-        if !M::STRUCTURE.constant_mass {
-            self.check_mass_at_end(h, &dq, &vguess)?;
+        self.predict(h);
+        let st = &self.state;
+        let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
+        let rep = self
+            .backend
+            .solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale)?;
+        // The last residual evaluation was at the accepted iterate, so the node values of
+        // the backend belong to the solution.
+        let sch = self.scheme;
+        let s1 = sch.stages() - 1;
+        let lay = self.backend.layout();
+        let z = self.backend.z();
+        for a in 0..N {
+            // The velocity guess: the step polynomial's slope at the end of the step.
+            self.v_end[a] = (1..=s1)
+                .map(|m| sch.end_slope(m) / h * z[lay.at(m, a)])
+                .sum();
+            self.q_end[a] = self.state.q.sum[a] + z[lay.at(s1, a)];
         }
-        self.commit(h, &dq, &sums, vguess);
+        if !M::STRUCTURE.constant_mass {
+            let at = (self.state.t_state + h, &self.q_end[..], &self.v_end[..]);
+            self.backend.mass_at_end(at, self.mass_sign)?;
+        }
+        let dw = if self.lean {
+            0.0
+        } else {
+            self.ledger_increment(h)
+        };
+        self.commit(h, dw);
         Ok((rep.iterations, rep.residual))
     }
 
-    /// Predicts and solves the step equations of a step of size `h` for `z`.
+    /// Takes the solved step: the compensated updates of `q`, `p` (by `Σ_j G_j =
+    /// h Σ_i b_i (L_q + F)_i`, a small increment, which keeps round-off low: DESIGN §3) and
+    /// the ledger, the predictor's polynomial, the time.
     #[inline]
-    fn solve_step(&mut self, h: f64) -> Result<NewtonReport, StepFailure> {
-        self.predict(h);
-        self.prob.h = h;
-        self.prob.t0 = self.t_state;
-        self.prob.q0 = self.q.sum;
-        self.prob.p0 = self.p.sum;
-        self.newton.invalidate();
-        let scale = self
-            .p
-            .sum
-            .amax()
-            .max(h * self.scale_f)
-            .max(f64::MIN_POSITIVE);
-        self.newton
-            .solve(&mut self.prob, &mut self.z, scale)
-            .map_err(StepFailure::Newton)
+    fn commit(&mut self, h: f64, dw: f64) {
+        let sch = self.scheme;
+        let (s1, r) = (sch.stages() - 1, sch.quadrature_nodes());
+        let lay = self.backend.layout();
+        let (backend, st) = (&self.backend, &mut self.state);
+        let z = backend.z();
+        let mut fmax = 0.0f64;
+        for a in 0..N {
+            let mut dp = 0.0;
+            for i in 0..r {
+                let f = backend.node_fq(i)[a];
+                dp += h * sch.b()[i] * f;
+                fmax = fmax.max(f.abs());
+            }
+            st.q.add(a, z[lay.at(s1, a)]);
+            st.p.add(a, dp);
+        }
+        st.v.copy_from_slice(&self.v_end);
+        st.add_work(dw);
+        st.z_prev.copy_from_slice(z);
+        st.has_prev = true;
+        st.h_prev = h;
+        st.t_state += h;
+        st.scale_f = fmax;
     }
 
-    /// The node sums of the solved step. `Σ_j G_j = h Σ_i b_i (L_q + F)_i` gives the
-    /// momentum update as a small increment, which keeps round-off low (DESIGN §3); the
-    /// ledger's increment is left out (zero) in a lean run.
-    #[inline]
-    fn node_sums(&self, h: f64) -> NodeSums<N> {
-        let sch = self.prob.scheme;
-        let mut dp = SVector::<f64, N>::zeros();
+    /// The ledger's increment over the step just solved: the work `h Σ b_i F·v` less
+    /// `h Σ b_i ∂L/∂t` (DESIGN §4, §7), from the model's own force and Lagrangian.
+    fn ledger_increment(&self, h: f64) -> f64 {
+        let s = M::STRUCTURE;
+        if !(s.has_force || s.uses_time) {
+            return 0.0;
+        }
+        let sch = self.scheme;
         let mut dw = 0.0;
-        let mut fmax: f64 = 0.0;
         for i in 0..sch.quadrature_nodes() {
-            let bi = sch.b()[i];
-            dp.axpy(h * bi, &self.prob.grads[i].fq, 1.0);
-            fmax = fmax.max(self.prob.grads[i].fq.amax());
-            let (uses_time, lean) = (M::STRUCTURE.uses_time, self.lean);
-            if (M::STRUCTURE.has_force || uses_time) && !lean {
-                // The ledger's increment: the work h Σ b_i F·v, less h Σ b_i ∂L/∂t.
-                let (x, v) = (self.prob.xs[i], self.prob.vs[i]);
-                let ti = self.t_state + sch.c()[i] * h;
-                let model = self.prob.model;
-                if M::STRUCTURE.has_force {
-                    let f = SVector::from(model.force_at::<f64>(ti, &x.into(), &v.into()));
-                    dw += h * bi * f.dot(&v);
-                }
-                dw -= h * bi * model.lagrangian_dt(ti, &x, &v);
+            let (Ok(x), Ok(v)) = (
+                <&[f64; N]>::try_from(self.backend.node_x(i)),
+                <&[f64; N]>::try_from(self.backend.node_v(i)),
+            ) else {
+                return f64::NAN;
+            };
+            let (ti, hb) = (self.state.t_state + sch.c()[i] * h, h * sch.b()[i]);
+            if s.has_force {
+                let f = self.model.force_at::<f64>(ti, x, v);
+                dw += hb * f.iter().zip(v).map(|(f, v)| f * v).sum::<f64>();
+            }
+            if s.uses_time {
+                let t = num_dual::Dual64::new(ti, 1.0);
+                dw -= hb * self.model.lagrangian_at(t, &lift(x), &lift(v)).eps;
             }
         }
-        NodeSums { dp, dw, fmax }
-    }
-
-    /// The velocity guess: the step polynomial's slope at the end of the step.
-    #[inline]
-    fn end_velocity(&self, h: f64) -> SVector<f64, N> {
-        let sch = self.prob.scheme;
-        let mut vguess = SVector::<f64, N>::zeros();
-        for m in 1..sch.stages() {
-            let zm = self.z.fixed_rows::<N>((m - 1) * N);
-            vguess.axpy(sch.end_slope(m) / h, &zm, 1.0);
-        }
-        vguess
-    }
-
-    /// A step may not end where the mass matrix is singular or has changed the sign of its
-    /// determinant: the path crossed a singular mass, where the Euler–Lagrange equations
-    /// stop being an ODE.
-    fn check_mass_at_end(
-        &self,
-        h: f64,
-        dq: &SVector<f64, N>,
-        vguess: &SVector<f64, N>,
-    ) -> Result<(), StepFailure> {
-        let q_end = self.q.sum + dq;
-        let e = self
-            .prob
-            .model
-            .mass_matrix_at(self.t_state + h, &q_end, vguess);
-        match mass_factor(&e) {
-            Some((rcond, sign)) if rcond >= MIN_MASS_RCOND && sign == self.mass_sign => Ok(()),
-            other => {
-                // A change of sign means a singular mass was crossed: condition 0.
-                let rcond = match other {
-                    Some((rc, sign)) if sign == self.mass_sign => rc,
-                    _ => 0.0,
-                };
-                Err(StepFailure::SingularMass { rcond })
-            }
-        }
-    }
-
-    /// Takes the solved step: the compensated updates, the predictor's polynomial, the time.
-    #[inline]
-    fn commit(&mut self, h: f64, dq: &SVector<f64, N>, sums: &NodeSums<N>, v: SVector<f64, N>) {
-        let s = self.prob.scheme.stages();
-        self.q.add(dq);
-        self.p.add(&sums.dp);
-        let (w, c) = &mut self.work;
-        kahan_add(w, c, sums.dw);
-        self.z_prev[0] = SVector::zeros();
-        for m in 1..s {
-            self.z_prev[m] = self.z.fixed_rows::<N>((m - 1) * N).into_owned();
-        }
-        self.has_prev = true;
-        self.h_prev = h;
-        self.t_state += h;
-        self.scale_f = sums.fmax;
-        self.v = v;
+        dw
     }
 
     /// One attempt at a step of size `h`: its residual, with the linear solves it took
@@ -167,7 +114,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 Ok(res)
             }
             Err(f) => {
-                *iters += self.newton.last_iterations();
+                *iters += self.backend.last_iterations();
                 Err(f)
             }
         }
@@ -177,14 +124,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     pub(super) fn step(&mut self) -> Result<StepRecord<N>, Error> {
         let t0 = self.time_of(self.k);
         let h = self.time_of(self.k + 1) - t0;
-        let snap = self.snapshot();
+        self.saved.copy_from(&self.state);
         let mut iters = 0;
-        let mut last_failure = None;
-        for level in 0..=self
-            .options
-            .max_subdivisions
-            .min(Integrator::<M, N>::MAX_SUBDIVISION_LEVELS)
-        {
+        let mut last_failure = StepFailure::Newton(NewtonFailure::NonFinite);
+        let levels =
+            (self.options.max_subdivisions).min(super::StepOptions::MAX_SUBDIVISION_LEVELS);
+        for level in 0..=levels {
             let parts = 1usize << level;
             let hs = h / parts as f64;
             let mut outcome = Ok(0.0);
@@ -199,24 +144,25 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     if parts > 1 {
                         self.stats.subdivided_steps += 1;
                         // The predictor's polynomial covered a substep; start afresh.
-                        self.has_prev = false;
+                        self.state.has_prev = false;
                     }
                     self.t = self.time_of(self.k + 1);
                     return self.finish_step(iters, res, parts);
                 }
+                Err(StepFailure::OutsidePattern) => {
+                    self.state.copy_from(&self.saved);
+                    return Err(Error::outside_pattern());
+                }
                 Err(f) => {
-                    last_failure = Some(f);
-                    self.restore(&snap);
+                    last_failure = f;
+                    self.state.copy_from(&self.saved);
                     // Retry without the (possibly bad) extrapolation.
-                    self.has_prev = false;
+                    self.state.has_prev = false;
                 }
             }
         }
-        self.restore(&snap);
-        Err(self.failure_error(
-            last_failure.unwrap_or(StepFailure::Newton(NewtonFailure::NonFinite)),
-            t0,
-        ))
+        self.state.copy_from(&self.saved);
+        Err(self.failure_error(last_failure, t0))
     }
 
     /// Completes an accepted step that ends at `self.t`: the velocity solve, the totals and
@@ -230,15 +176,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         self.k += 1;
         let t = self.t;
         // Substeps add up to the step only to round-off: the step's end is exact.
-        self.t_state = t;
+        self.state.t_state = t;
         self.stats.count_step(iters);
         if self.lean {
             // The state only; the velocity, energy and balance are left out (and checked
             // once at the end, `finish`).
-            return Ok(self.raw_record(iters, residual, substeps));
+            return Ok(self.record(iters, residual, substeps, false));
         }
-        self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
-        let rec = self.record(iters, residual, substeps);
+        self.solve_velocity()?;
+        let rec = self.record(iters, residual, substeps, true);
         let size = || rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
         if let Some(error) = record_error(&rec, size, self.k, t) {
             return Err(error);
@@ -249,13 +195,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// The error for a step from `t0` that could not be taken.
     pub(super) fn failure_error(&self, failure: StepFailure, t0: f64) -> Error {
         let step = self.k + 1;
-        let failure = match failure {
-            StepFailure::SingularMass { rcond } => {
-                return Error::SingularMassMatrix { step, t: t0, rcond }
-            }
-            StepFailure::Newton(f) => f,
-        };
-        let size = self.q.sum.amax().max(self.p.sum.amax()).max(self.v.amax());
-        newton_error(failure, size, step, t0)
+        match failure {
+            StepFailure::SingularMass { rcond } => Error::SingularMassMatrix { step, t: t0, rcond },
+            StepFailure::OutsidePattern => Error::outside_pattern(),
+            StepFailure::Newton(f) => newton_error(f, self.state.size(), step, t0),
+        }
     }
 }

@@ -1,10 +1,8 @@
-//! Checks shared by the dense and the sparse stepper: of a run's final time and options, of
-//! initial data, of a model's time flag; the step count; the error for a non-finite value.
+//! Checks of a run's final time and options, of initial data, of a model's time flag; the
+//! step count; the errors for a non-finite value and a failed solve.
 
-use nalgebra::SVector;
-
+use super::StepOptions;
 use crate::error::{Error, NewtonFailure};
-use crate::integrator::StepOptions;
 use crate::model::ForcedLagrangian;
 use crate::trajectory::{non_finite_field, StepRecord};
 
@@ -32,18 +30,20 @@ pub(crate) fn check_finite(what: &'static str, x: &[f64]) -> Result<(), Error> {
 /// evaluated without time.
 pub(super) fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
-    q: &SVector<f64, N>,
-    v: &SVector<f64, N>,
+    q: &[f64],
+    v: &[f64],
 ) -> Result<(), Error> {
     if M::STRUCTURE.uses_time {
         return Ok(());
     }
-    let (qa, va): ([f64; N], [f64; N]) = ((*q).into(), (*v).into());
-    let l = model.lagrangian::<f64>(&qa, &va);
-    let f = model.force::<f64>(&qa, &va);
+    let (Ok(qa), Ok(va)) = (<&[f64; N]>::try_from(q), <&[f64; N]>::try_from(v)) else {
+        return Ok(());
+    };
+    let l = model.lagrangian::<f64>(qa, va);
+    let f = model.force::<f64>(qa, va);
     for t in [0.7390851332151607, -2.5, 1e3] {
-        let same_l = model.lagrangian_at::<f64>(t, &qa, &va).to_bits() == l.to_bits();
-        let ft = model.force_at::<f64>(t, &qa, &va);
+        let same_l = model.lagrangian_at::<f64>(t, qa, va).to_bits() == l.to_bits();
+        let ft = model.force_at::<f64>(t, qa, va);
         let same_f = ft.iter().zip(&f).all(|(a, b)| a.to_bits() == b.to_bits());
         if !(same_l && same_f) {
             return Err(Error::InvalidModel {

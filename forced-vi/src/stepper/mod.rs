@@ -1,47 +1,98 @@
-//! The stepping loop: predictor, Newton solve of the step equations, compensated update,
-//! subdivision on failure, and the checks that make every `Ok` step trustworthy.
+//! The one stepping loop of every model size (DESIGN §10): predictor, Newton solve of the
+//! step equations on a [`StepBackend`](crate::backend), compensated update, subdivision on
+//! failure, adaptive steps, diagnostics on request, and the checks that make every `Ok` step
+//! trustworthy. What differs between a small and a large model is the backend's linear
+//! algebra; everything here is written once, over slices.
 //!
 //! | piece | module |
 //! |---|---|
-//! | the [`Stepper`] type, its records and its iterator | this one |
-//! | the start of a run: the initial state and the first record's data | `start` |
+//! | the [`Stepper`] type, its records, its iterator, its stack guard; [`StepOptions`] | this one |
+//! | the start of a run: the checks, the initial state, the first record's data | `start` |
 //! | one step: Newton solve, update, the mass check; subdivision on failure | `advance` |
 //! | adaptive steps by step doubling (DESIGN §8) | `adaptive` |
-//! | compensated sums, snapshots for retries, the predictor | `state` |
+//! | compensated sums and the state saved for retries | `state` |
+//! | the predictor from the previous step's polynomial | `predict` |
 //! | checks of a run, of initial data, of the time flag; step counts; non-finite values | `checks` |
 
 mod adaptive;
 mod advance;
 mod checks;
+mod predict;
 mod start;
 mod state;
 
-use nalgebra::{DVector, SVector};
+use nalgebra::SVector;
 
+use crate::backend::{Backend, StepBackend};
 use crate::control::{Controller, Tolerance};
 use crate::error::Error;
-use crate::initial::{solve_velocity, InitialState};
-use crate::integrator::{Integrator, StepOptions};
-use crate::model::ForcedLagrangian;
-use crate::newton::Newton;
-use crate::step_equations::StepProblem;
+use crate::model::{ForcedLagrangian, NodeJacobian};
+use crate::newton::NewtonOptions;
+use crate::scheme::Scheme;
 use crate::trajectory::{energy, non_finite_field, RunStats, StepRecord};
 
-#[cfg(feature = "sparse")]
-pub(crate) use checks::{check_finite, check_run, newton_error, record_error, step_count};
-#[cfg(feature = "sparse")]
-pub(crate) use state::kahan_add;
-use state::Kahan;
+use state::State;
 
-/// Runs `f` on a stack with room for the model's node kernels: the caller's own stack when
-/// it has `M::KERNEL_STACK_BYTES` to spare, else a fresh one on the heap (`stacker`).
+/// Options of the stepper. `Default`: default [`NewtonOptions`], no subdivision, at most
+/// [`StepOptions::DEFAULT_MAX_STEPS`] steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct StepOptions {
+    /// The Newton solver's options.
+    pub newton: NewtonOptions,
+    /// A failed step is retried as 2, 4, …, `2^max_subdivisions` substeps (default 0: off).
+    pub max_subdivisions: u32,
+    /// The most steps a run may take; a longer run is refused before it starts
+    /// ([`Error::TooManySteps`]).
+    pub max_steps: usize,
+}
+
+impl StepOptions {
+    /// The default cap on steps per run: 10⁹.
+    pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
+    /// The most subdivision levels a step may use: 2²⁰ substeps.
+    pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        StepOptions {
+            newton: NewtonOptions::default(),
+            max_subdivisions: 0,
+            max_steps: Self::DEFAULT_MAX_STEPS,
+        }
+    }
+}
+
+/// What a run is: the model, the scheme, the step, the options and the tolerances.
+pub(crate) struct RunSetup<'a, M, const N: usize> {
+    pub(crate) model: &'a M,
+    pub(crate) scheme: &'a Scheme,
+    pub(crate) h: f64,
+    pub(crate) options: StepOptions,
+    pub(crate) tolerance: Option<Tolerance<N>>,
+}
+
+/// The stack a step of the model needs, in bytes: on the dense backend, the node kernels'
+/// own ([`ForcedLagrangian::KERNEL_STACK_BYTES`]) and a few `N × N` node blocks, which the
+/// kernels return by value; on either, a few records of `N`-vectors.
+pub(crate) const fn step_stack_bytes<M: ForcedLagrangian<N>, const N: usize>(dense: bool) -> usize {
+    let records = 16 * std::mem::size_of::<StepRecord<N>>() + 256 * 1024;
+    if dense {
+        let blocks = 8 * std::mem::size_of::<NodeJacobian<N>>();
+        records
+            .saturating_add(blocks)
+            .saturating_add(M::KERNEL_STACK_BYTES)
+    } else {
+        records
+    }
+}
+
+/// Runs `f` on a stack with `need` bytes to spare: the caller's own stack when it has them,
+/// else a fresh one on the heap (`stacker`), so that no model size overflows a thread's
+/// stack, whichever thread runs it.
 #[inline]
-pub(crate) fn with_kernel_stack<M: ForcedLagrangian<N>, const N: usize, R>(
-    f: impl FnOnce() -> R,
-) -> R {
-    // The stepper's own frames: a few records, snapshots and matrices of the model's size.
-    let own = 64 * std::mem::size_of::<StepRecord<N>>() + 256 * 1024;
-    let need = M::KERNEL_STACK_BYTES.saturating_add(own);
+pub(crate) fn with_stack<R>(need: usize, f: impl FnOnce() -> R) -> R {
     if need <= 256 * 1024 {
         f()
     } else {
@@ -51,53 +102,45 @@ pub(crate) fn with_kernel_stack<M: ForcedLagrangian<N>, const N: usize, R>(
 
 /// Steps a model through time; an iterator over [`StepRecord`]s, initial state first.
 ///
-/// After an error the iterator yields that error once and then ends.
+/// The same stepper runs every model size, on the dense or the sparse backend (see
+/// [`LinearPath`](crate::LinearPath)), with fixed or adaptive steps. After an error the
+/// iterator yields that error once and then ends.
 pub struct Stepper<'a, M, const N: usize> {
-    prob: StepProblem<'a, M, N>,
-    newton: Newton,
+    model: &'a M,
+    scheme: &'a Scheme,
+    backend: Backend<'a, M, N>,
     options: StepOptions,
     h: f64,
     t_final: f64,
     n_steps: usize,
     k: usize,
-    q: Kahan<N>,
-    p: Kahan<N>,
-    v: SVector<f64, N>,
+    state: State,
+    saved: State,
     energy0: f64,
-    work: (f64, f64),
-    z: DVector<f64>,
-    z_prev: Vec<SVector<f64, N>>,
-    z_saved: Vec<SVector<f64, N>>,
-    has_prev: bool,
-    h_prev: f64,
-    scale_f: f64,
     /// Sign of the mass matrix's determinant at the start: a step that changes it has
     /// crossed a singular mass.
     mass_sign: f64,
+    /// Scratch of `N` entries: the end of a step's positions, its velocity, and the whole
+    /// step's `(q, p)` of step doubling.
+    q_end: Vec<f64>,
+    v_end: Vec<f64>,
+    whole: (Vec<f64>, Vec<f64>),
     /// The time of the record last handed out.
     t: f64,
-    /// The time of the current state `(q, p)` (ahead of `t` between substeps).
-    t_state: f64,
     /// Adaptive runs: the tolerances, the controller and the next step to try.
     tolerance: Option<Tolerance<N>>,
     controller: Controller,
     h_next: f64,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
+    /// The stack a step needs ([`step_stack_bytes`]).
+    stack: usize,
     stats: RunStats,
     started: bool,
     done: bool,
 }
 
-impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
-    pub(crate) fn new(
-        integ: &'a Integrator<'a, M, N>,
-        init: InitialState<N>,
-        t_final: f64,
-    ) -> Result<Self, Error> {
-        with_kernel_stack::<M, N, _>(|| Self::start(integ, init, t_final))
-    }
-
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// Number of steps the run will take (for an adaptive run, the number it would take
     /// with its first step size).
     pub fn total_steps(&self) -> usize {
@@ -109,6 +152,16 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         self.stats
     }
 
+    /// The backend the run steps on: [`LinearPath::Dense`](crate::LinearPath::Dense) or
+    /// [`LinearPath::Sparse`](crate::LinearPath::Sparse).
+    pub fn path(&self) -> crate::LinearPath {
+        match self.backend {
+            Backend::Dense(_) => crate::LinearPath::Dense,
+            #[cfg(feature = "sparse")]
+            Backend::Sparse(_) => crate::LinearPath::Sparse,
+        }
+    }
+
     fn time_of(&self, k: usize) -> f64 {
         if k >= self.n_steps {
             self.t_final
@@ -117,39 +170,30 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         }
     }
 
-    fn record(&self, newton_iterations: usize, residual: f64, substeps: usize) -> StepRecord<N> {
-        let (q, p, v) = (self.q.sum, self.p.sum, self.v);
-        let e = energy(self.prob.model, self.t, &q, &v, &p).unwrap_or(f64::NAN);
-        StepRecord {
-            step: self.k,
-            t: self.t,
-            q,
-            p,
-            v,
-            energy: e,
-            energy_balance: e - self.energy0 - self.work.0,
-            newton_iterations,
-            residual,
-            substeps,
-        }
-    }
-
-    /// A record of the state alone (lean runs): `v` is the step polynomial's end slope,
-    /// the energy fields are zero.
-    fn raw_record(
+    /// The record of the current state; with `diagnostics`, its energy and balance too
+    /// (else zero, and `v` is the step polynomial's end slope in a lean run).
+    fn record(
         &self,
         newton_iterations: usize,
         residual: f64,
         substeps: usize,
+        diagnostics: bool,
     ) -> StepRecord<N> {
+        let st = &self.state;
+        let (energy, energy_balance) = if diagnostics {
+            let e = energy(self.model, self.t, &st.q.sum, &st.v, &st.p.sum).unwrap_or(f64::NAN);
+            (e, e - self.energy0 - st.work.0)
+        } else {
+            (0.0, 0.0)
+        };
         StepRecord {
             step: self.k,
             t: self.t,
-            q: self.q.sum,
-            p: self.p.sum,
-            v: self.v,
-            energy: 0.0,
-            energy_balance: 0.0,
+            q: SVector::from_column_slice(&st.q.sum),
+            p: SVector::from_column_slice(&st.p.sum),
+            v: SVector::from_column_slice(&st.v),
+            energy,
+            energy_balance,
             newton_iterations,
             residual,
             substeps,
@@ -165,22 +209,30 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     /// The full record of the current state: the velocity solve and the energy. In a lean
     /// run the work was not summed, so the balance is not known: it is reported as zero.
     pub(crate) fn finish(&mut self) -> Result<StepRecord<N>, Error> {
-        let t = self.t;
-        if self.lean && self.k > 0 {
-            self.v = solve_velocity(self.prob.model, &self.q.sum, &self.p.sum, self.v, self.k, t)?;
-        }
-        let mut rec = self.record(0, 0.0, 1);
-        if self.lean {
-            rec.energy_balance = 0.0;
-        }
-        match non_finite_field(&rec) {
-            Some(quantity) => Err(Error::Overflow {
-                step: self.k,
-                t,
-                quantity,
-            }),
-            None => Ok(rec),
-        }
+        with_stack(self.stack, || {
+            if self.lean && self.k > 0 {
+                self.solve_velocity()?;
+            }
+            let mut rec = self.record(0, 0.0, 1, true);
+            if self.lean {
+                rec.energy_balance = 0.0;
+            }
+            match non_finite_field(&rec) {
+                Some(quantity) => Err(Error::Overflow {
+                    step: self.k,
+                    t: self.t,
+                    quantity,
+                }),
+                None => Ok(rec),
+            }
+        })
+    }
+
+    /// Solves `L_v(q, v) = p` at the current state, from the current `v`.
+    fn solve_velocity(&mut self) -> Result<(), Error> {
+        let st = &mut self.state;
+        let at = (self.t, &st.q.sum[..], &st.p.sum[..]);
+        self.backend.velocity(at, &mut st.v, self.k)
     }
 }
 
@@ -193,7 +245,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
         }
         if !self.started {
             self.started = true;
-            return Some(Ok(self.record(0, 0.0, 1)));
+            return Some(with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))));
         }
         if self.k >= self.n_steps && self.tolerance.is_none() {
             self.done = true;
@@ -201,13 +253,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
         }
         let out = match self.tolerance {
             Some(tol) if self.t < self.t_final => {
-                with_kernel_stack::<M, N, _>(|| self.step_adaptive(&tol))
+                with_stack(self.stack, || self.step_adaptive(&tol))
             }
             Some(_) => {
                 self.done = true;
                 return None;
             }
-            None => with_kernel_stack::<M, N, _>(|| self.step()),
+            None => with_stack(self.stack, || self.step()),
         };
         if out.is_err() {
             self.done = true;

@@ -1,10 +1,6 @@
-//! What a step changes and how it is saved: compensated sums, the snapshot for retries, and
-//! the predictor built from the previous step's polynomial.
-
-use nalgebra::SVector;
-
-use super::Stepper;
-use crate::model::ForcedLagrangian;
+//! What a step changes and how it is saved: compensated positions, momenta and ledger, the
+//! velocity, the predictor's polynomial, with a copy made in place for retries. Every
+//! vector lives on the heap, made once per run, whatever the model's size.
 
 /// One compensated (Kahan) addition of `dx` to `sum`, whose running compensation is `comp`.
 /// Every compensated sum of the crate (DESIGN §3: `q`, `p` and the ledger) goes through it.
@@ -17,90 +13,91 @@ pub(crate) fn kahan_add(sum: &mut f64, comp: &mut f64, dx: f64) {
 }
 
 /// Compensated (Kahan) accumulation of a vector.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Kahan<const N: usize> {
-    pub(super) sum: SVector<f64, N>,
-    comp: SVector<f64, N>,
+#[derive(Clone, Debug)]
+pub(crate) struct KahanVec {
+    pub(crate) sum: Vec<f64>,
+    comp: Vec<f64>,
 }
 
-impl<const N: usize> Kahan<N> {
-    pub(super) fn new(x: SVector<f64, N>) -> Self {
-        Kahan {
-            sum: x,
-            comp: SVector::zeros(),
+impl KahanVec {
+    fn new(n: usize) -> Self {
+        KahanVec {
+            sum: vec![0.0; n],
+            comp: vec![0.0; n],
         }
     }
-    pub(super) fn add(&mut self, dx: &SVector<f64, N>) {
-        for i in 0..N {
-            kahan_add(&mut self.sum[i], &mut self.comp[i], dx[i]);
-        }
+
+    /// Adds `dx` to component `i`.
+    #[inline(always)]
+    pub(crate) fn add(&mut self, i: usize, dx: f64) {
+        kahan_add(&mut self.sum[i], &mut self.comp[i], dx);
+    }
+
+    fn copy_from(&mut self, other: &KahanVec) {
+        self.sum.copy_from_slice(&other.sum);
+        self.comp.copy_from_slice(&other.comp);
     }
 }
 
-/// Saved state for retrying a step as substeps.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Snapshot<const N: usize> {
-    q: Kahan<N>,
-    p: Kahan<N>,
-    work: (f64, f64),
-    v: SVector<f64, N>,
-    has_prev: bool,
-    h_prev: f64,
-    scale_f: f64,
-    t_state: f64,
+/// What a step changes.
+#[derive(Clone, Debug)]
+pub(crate) struct State {
+    pub(crate) q: KahanVec,
+    pub(crate) p: KahanVec,
+    pub(crate) v: Vec<f64>,
+    /// The ledger `W − ∫L_t`, compensated: `(sum, compensation)`.
+    pub(crate) work: (f64, f64),
+    /// The last step's increments, in the backend's layout of the unknowns.
+    pub(crate) z_prev: Vec<f64>,
+    pub(crate) has_prev: bool,
+    pub(crate) h_prev: f64,
+    /// The largest `|L_q + F|` at a node of the last step: the residual's force scale.
+    pub(crate) scale_f: f64,
+    /// The time of `(q, p)` (ahead of the last record between substeps).
+    pub(crate) t_state: f64,
 }
 
-impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
-    pub(super) fn snapshot(&mut self) -> Snapshot<N> {
-        self.z_saved.copy_from_slice(&self.z_prev);
-        Snapshot {
-            q: self.q,
-            p: self.p,
-            work: self.work,
-            v: self.v,
-            has_prev: self.has_prev,
-            h_prev: self.h_prev,
-            scale_f: self.scale_f,
-            t_state: self.t_state,
+impl State {
+    /// A zero state for `n` coordinates and `unknowns` step unknowns.
+    pub(crate) fn new(n: usize, unknowns: usize) -> Self {
+        State {
+            q: KahanVec::new(n),
+            p: KahanVec::new(n),
+            v: vec![0.0; n],
+            work: (0.0, 0.0),
+            z_prev: vec![0.0; unknowns],
+            has_prev: false,
+            h_prev: 1.0,
+            scale_f: 0.0,
+            t_state: 0.0,
         }
     }
 
-    pub(super) fn restore(&mut self, s: &Snapshot<N>) {
-        self.z_prev.copy_from_slice(&self.z_saved);
-        self.q = s.q;
-        self.p = s.p;
-        self.work = s.work;
-        self.v = s.v;
-        self.has_prev = s.has_prev;
-        self.h_prev = s.h_prev;
-        self.scale_f = s.scale_f;
-        self.t_state = s.t_state;
+    /// Copies `other` into `self` without allocating.
+    pub(crate) fn copy_from(&mut self, other: &State) {
+        self.q.copy_from(&other.q);
+        self.p.copy_from(&other.p);
+        self.v.copy_from_slice(&other.v);
+        self.work = other.work;
+        self.z_prev.copy_from_slice(&other.z_prev);
+        self.has_prev = other.has_prev;
+        self.h_prev = other.h_prev;
+        self.scale_f = other.scale_f;
+        self.t_state = other.t_state;
     }
 
-    /// Fills `z` with the predictor: the previous step's polynomial extrapolated, or a
-    /// straight line along `v` on the first step.
-    pub(super) fn predict(&mut self, h: f64) {
-        let sch = self.prob.scheme;
-        let s = sch.stages();
-        let d = sch.d();
-        for (j, &dj) in d.iter().enumerate().skip(1) {
-            let zj = if self.has_prev && sch.extrapolates() {
-                let same = h == self.h_prev;
-                let tau = 1.0 + dj * h / self.h_prev;
-                let mut x = -self.z_prev[s - 1];
-                for m in 1..s {
-                    let l = if same {
-                        sch.extrapolation(j, m)
-                    } else {
-                        sch.basis_at(tau, m)
-                    };
-                    x += self.z_prev[m] * l;
-                }
-                x
-            } else {
-                self.v * (dj * h)
-            };
-            self.z.fixed_rows_mut::<N>((j - 1) * N).copy_from(&zj);
-        }
+    /// Adds `dw` to the ledger.
+    #[inline]
+    pub(crate) fn add_work(&mut self, dw: f64) {
+        let (w, c) = &mut self.work;
+        kahan_add(w, c, dw);
+    }
+
+    /// The largest `|q|`, `|p|`, `|v|`.
+    pub(crate) fn size(&self) -> f64 {
+        [&self.q.sum, &self.p.sum, &self.v]
+            .iter()
+            .flat_map(|x| x.iter())
+            .fold(0.0f64, |m, x| m.max(x.abs()))
     }
 }

@@ -11,6 +11,10 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::scalar::{lift, Scalar};
 
+mod sparse_node;
+
+pub use sparse_node::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
+
 /// Which derivative blocks a model can have; the macro fills this in from the expressions.
 ///
 /// The flags are promises: `false` means the quantity is identically zero (or constant), and
@@ -241,7 +245,7 @@ pub trait ForcedLagrangian<const N: usize> {
     /// The model's sparse node kernels (DESIGN §9), if it has them. `#[forced_lagrangian]`
     /// returns them for a model it can split into local terms; the default, `None`, keeps the
     /// dense path.
-    fn sparse_node(&self) -> Option<&dyn crate::sparse::SparseNode> {
+    fn sparse_node(&self) -> Option<&dyn SparseNode> {
         None
     }
 }

@@ -1,0 +1,207 @@
+//! The linear algebra of a step, behind one trait (DESIGN §10).
+//!
+//! What differs between a 2-coordinate model and a 4096-coordinate lattice is how a step's
+//! equations are stored, assembled, factored and solved, not the step. A [`StepBackend`]
+//! owns that: the step equations of DESIGN §3 on its own storage, the Newton iteration with
+//! its linear solver, and the velocity solve `L_v(q, v) = p`, with every buffer made once
+//! per run. The one [`Stepper`](crate::Stepper) (predictor, subdivision, error control,
+//! diagnostics, records and checks) sits above it and sees only slices.
+//!
+//! | backend | storage | module |
+//! |---|---|---|
+//! | [`DenseBackend`] | `N × N` node blocks from [`ForcedLagrangian::node_jacobian_at`], a dense step Jacobian, LU with partial pivoting | `dense` |
+//! | [`SparseBackend`] | node blocks on the model's [`SparseNode`](crate::model::SparseNode) pattern, faer's sparse LU with its symbolic analysis made once | `sparse` |
+//!
+//! The runtime dispatches on [`Backend`], an enum of the two, so that the public
+//! [`Stepper`](crate::Stepper) has one type for every model size.
+
+mod dense;
+#[cfg(feature = "sparse")]
+mod sparse;
+
+pub(crate) use dense::DenseBackend;
+#[cfg(feature = "sparse")]
+pub(crate) use sparse::SparseBackend;
+
+use crate::error::{Error, NewtonFailure};
+use crate::model::ForcedLagrangian;
+use crate::newton::NewtonReport;
+
+/// Where the unknowns of a step live: the increment `Z_m = x_m − q_k` of control point
+/// `m = 1 … s − 1`, coordinate `a`, is entry [`Layout::at`]`(m, a)` of the backend's vector.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Layout {
+    n: usize,
+    s1: usize,
+    /// The stages of one coordinate together (the sparse backend's banded order), or the
+    /// coordinates of one stage together (the dense one's).
+    coordinate_major: bool,
+}
+
+impl Layout {
+    /// The index of unknown `(m, a)`.
+    #[inline(always)]
+    pub(crate) fn at(&self, m: usize, a: usize) -> usize {
+        if self.coordinate_major {
+            a * self.s1 + m - 1
+        } else {
+            (m - 1) * self.n + a
+        }
+    }
+}
+
+/// Why one attempt at a step failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum StepFailure {
+    /// The Newton solve of the step equations failed.
+    Newton(NewtonFailure),
+    /// The step ended at a singular mass matrix or across one.
+    SingularMass { rcond: f64 },
+    /// A sparse kernel wrote outside the pattern recorded at the first evaluation.
+    OutsidePattern,
+}
+
+/// The linear algebra of a step. Slices of positions, velocities and momenta have the
+/// model's `N` entries.
+pub(crate) trait StepBackend {
+    /// The layout of the unknowns.
+    fn layout(&self) -> Layout;
+    /// The unknowns: the predictor is written here, the solution read from here.
+    fn z(&self) -> &[f64];
+    /// The unknowns, to write.
+    fn z_mut(&mut self) -> &mut [f64];
+    /// Solves the step equations of a step of size `h` from `(t0, q0, p0)`, starting from
+    /// the guess in [`Self::z`]; `scale` sets the residual's units. On success, the node
+    /// values ([`Self::node_fq`], …) belong to the solution.
+    fn solve(
+        &mut self,
+        h: f64,
+        t0: f64,
+        start: (&[f64], &[f64]),
+        scale: f64,
+    ) -> Result<NewtonReport, StepFailure>;
+    /// Linear solves of the last [`Self::solve`], converged or not.
+    fn last_iterations(&self) -> usize;
+    /// `L_q + F` at quadrature node `i` of the last residual evaluation.
+    fn node_fq(&self, i: usize) -> &[f64];
+    /// The position at quadrature node `i`.
+    fn node_x(&self, i: usize) -> &[f64];
+    /// The velocity at quadrature node `i`.
+    fn node_v(&self, i: usize) -> &[f64];
+    /// `(L_q + F, L_v)` at `(t, q, v)` into `fq` and `lv`.
+    fn gradient(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        fq: &mut [f64],
+        lv: &mut [f64],
+    ) -> Result<(), Error>;
+    /// Solves `L_v(q, v) = p` for `v` from the guess in `v`.
+    fn velocity(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        v: &mut [f64],
+        step: usize,
+    ) -> Result<(), Error>;
+    /// Checks the mass matrix of the initial data; returns the sign of its determinant.
+    fn mass_sign(&mut self, at: (f64, &[f64], &[f64])) -> Result<f64, Error>;
+    /// Checks the mass matrix at a step's end: regular, with the determinant's sign
+    /// `sign` of the start (a change means a singular mass was crossed).
+    fn mass_at_end(&mut self, at: (f64, &[f64], &[f64]), sign: f64) -> Result<(), StepFailure>;
+    /// Whether the node kernels of this backend need a deep stack (see
+    /// [`crate::stepper`]'s stack guard).
+    fn deep_stack(&self) -> bool;
+}
+
+/// The backend of a run: dense or sparse.
+// One per run, inside the stepper and never moved on the hot path: boxing the larger
+// variant would only add an indirection to every call.
+#[allow(clippy::large_enum_variant)]
+pub(crate) enum Backend<'a, M, const N: usize> {
+    /// `N × N` node blocks.
+    Dense(DenseBackend<'a, M, N>),
+    /// Node blocks on the model's sparse pattern.
+    #[cfg(feature = "sparse")]
+    Sparse(SparseBackend<'a>),
+}
+
+/// Forwards a call to the backend in use.
+macro_rules! forward {
+    ($self:ident, $b:ident => $e:expr) => {
+        match $self {
+            Backend::Dense($b) => $e,
+            #[cfg(feature = "sparse")]
+            Backend::Sparse($b) => $e,
+        }
+    };
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
+    #[inline(always)]
+    fn layout(&self) -> Layout {
+        forward!(self, b => b.layout())
+    }
+    #[inline(always)]
+    fn z(&self) -> &[f64] {
+        forward!(self, b => b.z())
+    }
+    #[inline(always)]
+    fn z_mut(&mut self) -> &mut [f64] {
+        forward!(self, b => b.z_mut())
+    }
+    #[inline(always)]
+    fn solve(
+        &mut self,
+        h: f64,
+        t0: f64,
+        start: (&[f64], &[f64]),
+        scale: f64,
+    ) -> Result<NewtonReport, StepFailure> {
+        forward!(self, b => b.solve(h, t0, start, scale))
+    }
+    #[inline(always)]
+    fn last_iterations(&self) -> usize {
+        forward!(self, b => b.last_iterations())
+    }
+    #[inline(always)]
+    fn node_fq(&self, i: usize) -> &[f64] {
+        forward!(self, b => b.node_fq(i))
+    }
+    #[inline(always)]
+    fn node_x(&self, i: usize) -> &[f64] {
+        forward!(self, b => b.node_x(i))
+    }
+    #[inline(always)]
+    fn node_v(&self, i: usize) -> &[f64] {
+        forward!(self, b => b.node_v(i))
+    }
+    #[inline(always)]
+    fn gradient(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        fq: &mut [f64],
+        lv: &mut [f64],
+    ) -> Result<(), Error> {
+        forward!(self, b => b.gradient(at, fq, lv))
+    }
+    #[inline(always)]
+    fn velocity(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        v: &mut [f64],
+        step: usize,
+    ) -> Result<(), Error> {
+        forward!(self, b => b.velocity(at, v, step))
+    }
+    #[inline(always)]
+    fn mass_sign(&mut self, at: (f64, &[f64], &[f64])) -> Result<f64, Error> {
+        forward!(self, b => b.mass_sign(at))
+    }
+    #[inline(always)]
+    fn mass_at_end(&mut self, at: (f64, &[f64], &[f64]), sign: f64) -> Result<(), StepFailure> {
+        forward!(self, b => b.mass_at_end(at, sign))
+    }
+    #[inline(always)]
+    fn deep_stack(&self) -> bool {
+        forward!(self, b => b.deep_stack())
+    }
+}

@@ -1,0 +1,161 @@
+//! The sparse backend (DESIGN §9): node blocks on the model's recorded pattern, the step
+//! Jacobian on the pattern they induce, factored by faer's sparse LU with the symbolic
+//! analysis and the workspace made once per run.
+
+use super::{Layout, StepBackend, StepFailure};
+use crate::error::Error;
+use crate::model::{NodePattern, NodeSink, SparseNode};
+use crate::newton::{NewtonOptions, NewtonReport};
+use crate::scheme::Scheme;
+use crate::sparse::equations::SparseStep;
+use crate::sparse::lu::SparseLu;
+use crate::sparse::newton::SparseNewton;
+use crate::sparse::velocity::VelocitySolver;
+
+/// The sparse step equations, their Newton solver, the velocity solver and the unknowns.
+pub(crate) struct SparseBackend<'a> {
+    prob: SparseStep<'a>,
+    newton: SparseNewton,
+    velocity: VelocitySolver,
+    z: Vec<f64>,
+}
+
+impl<'a> SparseBackend<'a> {
+    /// Buffers for `node` and `scheme` on the recorded node `pattern`; with `constant_mass`
+    /// (the model's promise) the velocity solve factors `E` once.
+    pub(crate) fn new(
+        node: &'a dyn SparseNode,
+        scheme: &'a Scheme,
+        pattern: NodePattern,
+        newton: NewtonOptions,
+        constant_mass: bool,
+    ) -> Result<Self, Error> {
+        let velocity = VelocitySolver::new(&pattern, constant_mass)?;
+        let mut prob = SparseStep::new(node, scheme, pattern);
+        let lu = SparseLu::new(
+            prob.step_pattern.dim,
+            std::mem::take(&mut prob.step_pattern.col_ptr),
+            std::mem::take(&mut prob.step_pattern.row_idx),
+        )
+        .map_err(|_| Error::InvalidModel {
+            message: "the sparse step pattern cannot be analysed".into(),
+        })?;
+        Ok(SparseBackend {
+            z: vec![0.0; prob.step_pattern.dim],
+            prob,
+            newton: SparseNewton::new(lu, newton),
+            velocity,
+        })
+    }
+}
+
+impl StepBackend for SparseBackend<'_> {
+    #[inline(always)]
+    fn layout(&self) -> Layout {
+        Layout {
+            n: self.prob.n,
+            s1: self.prob.scheme.stages() - 1,
+            coordinate_major: true,
+        }
+    }
+
+    #[inline(always)]
+    fn z(&self) -> &[f64] {
+        &self.z
+    }
+
+    #[inline(always)]
+    fn z_mut(&mut self) -> &mut [f64] {
+        &mut self.z
+    }
+
+    fn solve(
+        &mut self,
+        h: f64,
+        t0: f64,
+        (q0, p0): (&[f64], &[f64]),
+        scale: f64,
+    ) -> Result<NewtonReport, StepFailure> {
+        let prob = &mut self.prob;
+        prob.h = h;
+        prob.t0 = t0;
+        prob.q0.copy_from_slice(q0);
+        prob.p0.copy_from_slice(p0);
+        self.newton.invalidate();
+        self.newton.solve(prob, &mut self.z, scale).map_err(|f| {
+            if prob.outside {
+                StepFailure::OutsidePattern
+            } else {
+                StepFailure::Newton(f)
+            }
+        })
+    }
+
+    #[inline(always)]
+    fn last_iterations(&self) -> usize {
+        self.newton.last_iterations()
+    }
+
+    #[inline(always)]
+    fn node_fq(&self, i: usize) -> &[f64] {
+        let n = self.prob.n;
+        &self.prob.fq[i * n..(i + 1) * n]
+    }
+
+    #[inline(always)]
+    fn node_x(&self, i: usize) -> &[f64] {
+        let n = self.prob.n;
+        &self.prob.xs[i * n..(i + 1) * n]
+    }
+
+    #[inline(always)]
+    fn node_v(&self, i: usize) -> &[f64] {
+        let n = self.prob.n;
+        &self.prob.vs[i * n..(i + 1) * n]
+    }
+
+    fn gradient(
+        &mut self,
+        (t, q, v): (f64, &[f64], &[f64]),
+        fq: &mut [f64],
+        lv: &mut [f64],
+    ) -> Result<(), Error> {
+        let mut sink = NodeSink::gradient(fq, lv);
+        self.prob.node.eval(t, q, v, &mut sink);
+        if sink.outside() {
+            return Err(Error::outside_pattern());
+        }
+        let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
+        if !(finite(fq) && finite(lv)) {
+            return Err(Error::NonFiniteModel { step: 0, t });
+        }
+        Ok(())
+    }
+
+    fn velocity(
+        &mut self,
+        (t, q, p): (f64, &[f64], &[f64]),
+        v: &mut [f64],
+        step: usize,
+    ) -> Result<(), Error> {
+        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        self.velocity.solve(node, pattern, (t, q, p), v, step)
+    }
+
+    fn mass_sign(&mut self, at: (f64, &[f64], &[f64])) -> Result<f64, Error> {
+        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        self.velocity.check_mass(node, pattern, at)?;
+        Ok(1.0)
+    }
+
+    /// The sparse LU gives no determinant's sign: a singular mass at the step's end shows
+    /// in the velocity solve that follows ([`Error::SingularMassMatrix`]).
+    fn mass_at_end(&mut self, _at: (f64, &[f64], &[f64]), _sign: f64) -> Result<(), StepFailure> {
+        Ok(())
+    }
+
+    #[inline(always)]
+    fn deep_stack(&self) -> bool {
+        false
+    }
+}

@@ -1,0 +1,117 @@
+//! Trust: the dense backend never aborts on a large model. Every run method on the dense
+//! path, at `N = 256` and at the largest `N` the dense path accepts
+//! ([`LinearPath::DENSE_MAX_DOF`]), on the main thread and on a thread with the default
+//! 2 MiB stack; one coordinate more is the typed [`Error::ModelTooLarge`] on the dense path
+//! and the sparse backend under `Auto`. The node kernels return `N × N` blocks by value (32
+//! MiB at `N = 1024`), so the stepper runs a step on a stack sized for it.
+//!
+//! A test binary of its own, without libtest's harness, so that the main thread is one of
+//! the threads tested (libtest runs tests on threads of its own):
+//! `cargo test --release -p forced-vi-models --test trust_dense_stack`.
+
+use forced_vi::prelude::*;
+use forced_vi::{Error, LinearPath};
+use forced_vi_models::models::SpringChain;
+
+const H: f64 = 0.02;
+/// Two steps: the second `next()` of the reproducer is a step of a running stepper.
+const T: f64 = 2.0 * H;
+
+fn initial<const N: usize>() -> InitialState<N> {
+    let q = std::array::from_fn(|i| 0.1 * ((i + 1) as f64 * 0.7).sin());
+    InitialState::from_velocity(q, [0.0; N])
+}
+
+fn dense<const N: usize>(model: &SpringChain<N>) -> Integrator<'_, SpringChain<N>, N> {
+    // lobatto2 at the largest N: its LU (N × N) keeps the test to seconds.
+    let s = if N > 256 { 2 } else { 3 };
+    Integrator::new(model, Scheme::lobatto(s).unwrap(), H)
+        .unwrap()
+        .linear_path(LinearPath::Dense)
+}
+
+/// The final positions of every run method, which must agree.
+fn every_method<const N: usize>() -> Vec<(&'static str, f64)> {
+    let model = SpringChain::<N>::DEFAULT;
+    let integ = dense(&model);
+    assert_eq!(integ.path_for(&initial()).unwrap(), LinearPath::Dense);
+    let mut out = Vec::new();
+    let run = integ.run(initial(), T).unwrap();
+    out.push(("run", run.last().unwrap().q[N / 2]));
+    let fin = integ.final_state(initial(), T).unwrap();
+    out.push(("final_state", fin.q[N / 2]));
+    let mut last = 0.0;
+    integ
+        .for_each_step(initial(), T, |r| last = r.q[N / 2])
+        .unwrap();
+    out.push(("for_each_step", last));
+    let mut stepper = integ.stepper(initial(), T).unwrap();
+    assert_eq!(stepper.path(), LinearPath::Dense);
+    let end = stepper.by_ref().last().unwrap().unwrap();
+    out.push(("stepper", end.q[N / 2]));
+    let samples = integ.sample(initial(), &[T]).unwrap();
+    out.push(("sample", samples[0].q[N / 2]));
+    let adaptive = integ.clone().tolerances(1e-6, 1e-6).unwrap();
+    let ada = adaptive.final_state(initial(), T).unwrap();
+    let runs = integ.run_ensemble(&[initial(), initial()], T);
+    for r in runs {
+        out.push(("run_ensemble", r.unwrap().last().unwrap().q[N / 2]));
+    }
+    for r in integ.run_ensemble_final(&[initial()], T) {
+        out.push(("run_ensemble_final", r.unwrap().q[N / 2]));
+    }
+    let reference = out[0].1;
+    for (name, q) in &out {
+        assert!(
+            (q - reference).abs() <= 1e-12 * reference.abs().max(1e-3),
+            "N = {N}, {name}: {q} against run's {reference}"
+        );
+    }
+    assert!(
+        (ada.q[N / 2] - reference).abs() < 1e-5,
+        "adaptive {}",
+        ada.q[N / 2]
+    );
+    out
+}
+
+/// One coordinate more than the dense path takes: typed errors, never an abort.
+fn too_large_for_dense() {
+    const N: usize = LinearPath::DENSE_MAX_DOF + 1;
+    let model = SpringChain::<N>::DEFAULT;
+    let integ = dense(&model);
+    let err = integ.final_state(initial(), T).unwrap_err().error;
+    assert!(matches!(err, Error::ModelTooLarge { dof: N, .. }), "{err}");
+    let err = integ.stepper(initial(), T).err().unwrap();
+    assert!(matches!(err, Error::ModelTooLarge { .. }), "{err}");
+    let err = integ.run(initial(), T).unwrap_err().error;
+    assert_eq!(err.kind(), "model_too_large");
+    // Under Auto the model's sparse kernels take it.
+    let auto = integ.linear_path(LinearPath::Auto);
+    assert_eq!(auto.path_for(&initial()).unwrap(), LinearPath::Sparse);
+    assert!(auto.final_state(initial(), T).is_ok());
+}
+
+/// Runs `f` on the main thread, then on a thread with a 2 MiB stack.
+fn on_both_threads(name: &str, f: fn()) {
+    f();
+    println!("test {name} (main thread) ... ok");
+    std::thread::Builder::new()
+        .name(name.into())
+        .stack_size(2 << 20)
+        .spawn(f)
+        .unwrap()
+        .join()
+        .unwrap_or_else(|_| panic!("{name} failed on a 2 MiB thread"));
+    println!("test {name} (2 MiB thread) ... ok");
+}
+
+fn main() {
+    on_both_threads("trust_dense_every_method_at_256", || {
+        every_method::<256>();
+    });
+    on_both_threads("trust_dense_every_method_at_the_largest_n", || {
+        every_method::<{ LinearPath::DENSE_MAX_DOF }>();
+    });
+    on_both_threads("trust_dense_model_too_large", too_large_for_dense);
+}
