@@ -56,11 +56,7 @@ fn vector<const N: usize>(x: &[f64]) -> SVector<f64, N> {
 impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M, N> {
     #[inline(always)]
     fn layout(&self) -> Layout {
-        Layout {
-            n: N,
-            s1: self.prob.scheme.stages() - 1,
-            coordinate_major: false,
-        }
+        Layout::new(N, self.prob.scheme.stages() - 1, false)
     }
 
     #[inline(always)]

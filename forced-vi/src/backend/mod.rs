@@ -29,24 +29,38 @@ use crate::newton::NewtonReport;
 
 /// Where the unknowns of a step live: the increment `Z_m = x_m − q_k` of control point
 /// `m = 1 … s − 1`, coordinate `a`, is entry [`Layout::at`]`(m, a)` of the backend's vector.
+///
+/// The stages of one coordinate together (the sparse backend's banded order) or the
+/// coordinates of one stage together (the dense one's): either way, strides.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Layout {
-    n: usize,
-    s1: usize,
-    /// The stages of one coordinate together (the sparse backend's banded order), or the
-    /// coordinates of one stage together (the dense one's).
-    coordinate_major: bool,
+    /// The distance between two coordinates of one stage.
+    coordinate: usize,
+    /// The distance between two stages of one coordinate.
+    stage: usize,
 }
 
 impl Layout {
+    /// The layout of `n` coordinates and `s1` stages, the stages of a coordinate together
+    /// (`coordinate_major`) or the coordinates of a stage.
+    pub(crate) fn new(n: usize, s1: usize, coordinate_major: bool) -> Self {
+        if coordinate_major {
+            Layout {
+                coordinate: s1,
+                stage: 1,
+            }
+        } else {
+            Layout {
+                coordinate: 1,
+                stage: n,
+            }
+        }
+    }
+
     /// The index of unknown `(m, a)`.
     #[inline(always)]
     pub(crate) fn at(&self, m: usize, a: usize) -> usize {
-        if self.coordinate_major {
-            a * self.s1 + m - 1
-        } else {
-            (m - 1) * self.n + a
-        }
+        a * self.coordinate + (m - 1) * self.stage
     }
 }
 

@@ -52,11 +52,7 @@ impl<'a> SparseBackend<'a> {
 impl StepBackend for SparseBackend<'_> {
     #[inline(always)]
     fn layout(&self) -> Layout {
-        Layout {
-            n: self.prob.n,
-            s1: self.prob.scheme.stages() - 1,
-            coordinate_major: true,
-        }
+        Layout::new(self.prob.n, self.prob.scheme.stages() - 1, true)
     }
 
     #[inline(always)]

@@ -34,14 +34,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         mut f: impl FnMut(&StepRecord<N>),
     ) -> Result<RunStats, RunFailure<N>> {
         self.open(init, t_final, |stepper| {
-            let mut last = None;
             while let Some(rec) = stepper.next() {
                 match rec {
-                    Ok(r) => {
-                        f(&r);
-                        last = Some(Box::new(r));
-                    }
-                    Err(error) => return Err(RunFailure::after(error, stepper.stats(), last)),
+                    Ok(r) => f(&r),
+                    Err(error) => return Err(stepper.failure(error)),
                 }
             }
             Ok(stepper.stats())
@@ -59,17 +55,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
     ) -> Result<FinalState<N>, RunFailure<N>> {
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
-            let mut last = None;
             while let Some(rec) = stepper.next() {
-                match rec {
-                    Ok(r) => last = Some(Box::new(r)),
-                    Err(e) => return Err(RunFailure::after(e, stepper.stats(), last)),
+                if let Err(e) = rec {
+                    return Err(stepper.failure(e));
                 }
             }
             let stats = stepper.stats();
-            let end = stepper
-                .finish()
-                .map_err(|e| RunFailure::after(e, stats, last))?;
+            let end = stepper.finish().map_err(|e| stepper.failure(e))?;
             Ok(FinalState {
                 t: end.t,
                 q: end.q,
@@ -105,7 +97,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
                 let rec = match rec {
                     Ok(r) => r,
                     Err(e) => {
-                        let mut failure = RunFailure::after(e, stepper.stats(), prev.map(Box::new));
+                        let mut failure = stepper.failure(e);
                         failure.samples = out;
                         return Err(failure);
                     }

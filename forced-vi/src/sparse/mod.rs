@@ -13,7 +13,7 @@
 //! | the kernels' interface: [`SparseNode`], [`NodeSink`], [`NodePattern`] (re-exported from [`crate::model`]) | this one |
 //! | recording the node pattern, the step Jacobian's pattern | `pattern` |
 //! | the step equations (DESIGN §3) on sparse storage | `equations` |
-//! | faer's sparse LU on a fixed pattern | `lu` |
+//! | a sparse LU on a fixed pattern, allocation-free per factorisation, backed by faer's | `lu`, `supernodal` |
 //! | the Newton iteration's sparse linear solver | `newton` |
 //! | the velocity solve `L_v(q, v) = p` | `velocity` |
 
@@ -25,6 +25,8 @@ pub(crate) mod lu;
 pub(crate) mod newton;
 #[cfg(feature = "sparse")]
 pub(crate) mod pattern;
+#[cfg(feature = "sparse")]
+mod supernodal;
 #[cfg(feature = "sparse")]
 pub(crate) mod velocity;
 

@@ -54,18 +54,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let sch = self.scheme;
         let (s1, r) = (sch.stages() - 1, sch.quadrature_nodes());
         let lay = self.backend.layout();
-        let (backend, st) = (&self.backend, &mut self.state);
+        let (backend, st, dp) = (&self.backend, &mut self.state, &mut self.dp);
         let z = backend.z();
         let mut fmax = 0.0f64;
-        for a in 0..N {
-            let mut dp = 0.0;
-            for i in 0..r {
-                let f = backend.node_fq(i)[a];
-                dp += h * sch.b()[i] * f;
+        dp.fill(0.0);
+        for i in 0..r {
+            let (hb, fq) = (h * sch.b()[i], backend.node_fq(i));
+            for (d, &f) in dp.iter_mut().zip(fq) {
+                *d += hb * f;
                 fmax = fmax.max(f.abs());
             }
+        }
+        for (a, &d) in dp.iter().enumerate() {
             st.q.add(a, z[lay.at(s1, a)]);
-            st.p.add(a, dp);
+            st.p.add(a, d);
         }
         st.v.copy_from_slice(&self.v_end);
         st.add_work(dw);
@@ -124,11 +126,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     pub(super) fn step(&mut self) -> Result<StepRecord<N>, Error> {
         let t0 = self.time_of(self.k);
         let h = self.time_of(self.k + 1) - t0;
-        self.saved.copy_from(&self.state);
         let mut iters = 0;
         let mut last_failure = StepFailure::Newton(NewtonFailure::NonFinite);
         let levels =
             (self.options.max_subdivisions).min(super::StepOptions::MAX_SUBDIVISION_LEVELS);
+        // A failed attempt changes nothing of the state (only a solved step commits), so
+        // the state needs saving only for substeps, which commit one by one.
+        if levels > 0 {
+            self.saved.copy_from(&self.state);
+        }
         for level in 0..=levels {
             let parts = 1usize << level;
             let hs = h / parts as f64;
@@ -149,19 +155,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     self.t = self.time_of(self.k + 1);
                     return self.finish_step(iters, res, parts);
                 }
-                Err(StepFailure::OutsidePattern) => {
-                    self.state.copy_from(&self.saved);
-                    return Err(Error::outside_pattern());
-                }
                 Err(f) => {
+                    if levels > 0 {
+                        self.state.copy_from(&self.saved);
+                    }
+                    if f == StepFailure::OutsidePattern {
+                        return Err(Error::outside_pattern());
+                    }
                     last_failure = f;
-                    self.state.copy_from(&self.saved);
                     // Retry without the (possibly bad) extrapolation.
                     self.state.has_prev = false;
                 }
             }
         }
-        self.state.copy_from(&self.saved);
         Err(self.failure_error(last_failure, t0))
     }
 

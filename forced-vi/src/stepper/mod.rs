@@ -29,7 +29,7 @@ use crate::error::Error;
 use crate::model::{ForcedLagrangian, NodeJacobian};
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
-use crate::trajectory::{energy, non_finite_field, RunStats, StepRecord};
+use crate::trajectory::{energy, non_finite_field, RunFailure, RunStats, StepRecord};
 
 use state::State;
 
@@ -124,6 +124,10 @@ pub struct Stepper<'a, M, const N: usize> {
     /// step's `(q, p)` of step doubling.
     q_end: Vec<f64>,
     v_end: Vec<f64>,
+    /// Scratch: the momentum update of a step.
+    dp: Vec<f64>,
+    /// Scratch: the predictor's basis values at one control point (entry `m = 1 … s − 1`).
+    basis: Vec<f64>,
     whole: (Vec<f64>, Vec<f64>),
     /// The time of the record last handed out.
     t: f64,
@@ -226,6 +230,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 None => Ok(rec),
             }
         })
+    }
+
+    /// The failure of this run with `error`: the totals, and the last state the run
+    /// reached (its `q` and `p`; `v` is the step polynomial's end slope and the energy
+    /// fields are zero in a lean run).
+    pub(crate) fn failure(&self, error: Error) -> RunFailure<N> {
+        let last = self
+            .started
+            .then(|| Box::new(self.record(0, 0.0, 1, false)));
+        RunFailure::after(error, self.stats, last)
     }
 
     /// Solves `L_v(q, v) = p` at the current state, from the current `v`.

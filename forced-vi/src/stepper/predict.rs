@@ -14,6 +14,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let st = &self.state;
         let extrapolate = st.has_prev && sch.extrapolates();
         let same = h == st.h_prev;
+        let basis = &mut self.basis;
         let z = self.backend.z_mut();
         for j in 1..=s1 {
             let dj = sch.d()[j];
@@ -24,14 +25,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 continue;
             }
             let tau = 1.0 + dj * h / st.h_prev;
+            for (m, l) in basis.iter_mut().enumerate().skip(1) {
+                *l = if same {
+                    sch.extrapolation(j, m)
+                } else {
+                    sch.basis_at(tau, m)
+                };
+            }
             for a in 0..N {
                 let mut x = -st.z_prev[lay.at(s1, a)];
-                for m in 1..=s1 {
-                    let l = if same {
-                        sch.extrapolation(j, m)
-                    } else {
-                        sch.basis_at(tau, m)
-                    };
+                for (m, l) in basis.iter().enumerate().skip(1) {
                     x += st.z_prev[lay.at(m, a)] * l;
                 }
                 z[lay.at(j, a)] = x;

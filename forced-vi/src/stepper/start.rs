@@ -67,6 +67,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             mass_sign,
             q_end: vec![0.0; N],
             v_end: vec![0.0; N],
+            dp: vec![0.0; N],
+            basis: vec![0.0; scheme.stages()],
             whole: (vec![0.0; N], vec![0.0; N]),
             t: 0.0,
             tolerance,

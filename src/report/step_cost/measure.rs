@@ -81,6 +81,25 @@ fn allocs_per_step<M: ForcedLagrangian<N>, const N: usize>(
     Ok(last.saturating_sub(first) as f64 / stats.steps.max(1) as f64)
 }
 
+/// Allocations per step of the final-state run (no diagnostics): the difference between a
+/// run to `t_final` and one to half of it, over the difference of their steps, so that what
+/// a run allocates once (its buffers) cancels.
+fn allocs_per_step_lean<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+    init: InitialState<N>,
+    t_final: f64,
+    counter: AllocCounter,
+) -> Result<f64, String> {
+    let mut run = |t| {
+        let before = counter();
+        let end = integ.final_state(init, t).map_err(|e| e.to_string())?;
+        Ok::<_, String>((counter() - before, end.stats.steps))
+    };
+    let (a_half, s_half) = run(0.5 * t_final)?;
+    let (a_full, s_full) = run(t_final)?;
+    Ok(a_full.saturating_sub(a_half) as f64 / s_full.saturating_sub(s_half).max(1) as f64)
+}
+
 /// Which run each paper-model row times, in report order.
 pub const DIAGNOSTICS: [&str; 2] = ["full", "none"];
 
@@ -103,7 +122,6 @@ pub fn paper_rows(quick: bool, counter: Option<AllocCounter>) -> (Vec<Row>, bool
                 allocs: None,
                 note: String::new(),
             };
-            let counter = counter.filter(|_| diagnostics == "full");
             if let Err(e) = paper_row(&mut row, quick, counter, &mut same) {
                 row.note = format!("failed: {e}");
             }
@@ -140,8 +158,13 @@ fn paper_row(
     row.handwritten = Some(h);
     row.iters = Some(sg.newton_iterations as f64 / sg.steps.max(1) as f64);
     if let Some(c) = counter {
-        let ag = allocs_per_step(&ig, PAPER_INIT, t_final, c)?;
-        let ah = allocs_per_step(&ih, PAPER_INIT, t_final, c)?;
+        let (ag, ah) = if d == "full" {
+            let ag = allocs_per_step(&ig, PAPER_INIT, t_final, c)?;
+            (ag, allocs_per_step(&ih, PAPER_INIT, t_final, c)?)
+        } else {
+            let ag = allocs_per_step_lean(&ig, PAPER_INIT, t_final, c)?;
+            (ag, allocs_per_step_lean(&ih, PAPER_INIT, t_final, c)?)
+        };
         row.allocs = Some(ag.max(ah));
     }
     Ok(())

@@ -24,9 +24,8 @@ pub const LATTICE_WIDTHS: [usize; 6] = [2, 4, 8, 16, 32, 64];
 pub const SCHEMES: [&str; 2] = ["lobatto2", "lobatto3"];
 /// The step size of every run.
 const H: f64 = 0.01;
-/// The dense path is not run beyond this size: its four `N × N` node blocks per node alone
-/// take 4·8·n² bytes (128 MiB each at n = 2048).
-const DENSE_MAX_N: usize = 1024;
+/// The dense path is not run beyond the size it takes ([`LinearPath::DENSE_MAX_DOF`]).
+const DENSE_MAX_N: usize = LinearPath::DENSE_MAX_DOF;
 
 /// What one size measured: ns per step (generated, hand-written), Newton iterations and
 /// allocations per step, and the peak RSS of the sparse run in KiB.
@@ -295,7 +294,7 @@ fn series(
         }
         if path == LinearPath::Dense && n > DENSE_MAX_N {
             rows.push(skip(format!(
-                "dense path not run: four {n}×{n} node blocks per node"
+                "dense path refuses n > {DENSE_MAX_N} (ModelTooLarge)"
             )));
             continue;
         }
