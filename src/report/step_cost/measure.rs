@@ -90,7 +90,7 @@ fn allocs_per_step_lean<M: ForcedLagrangian<N>, const N: usize>(
     t_final: f64,
     counter: AllocCounter,
 ) -> Result<f64, String> {
-    let mut run = |t| {
+    let run = |t| {
         let before = counter();
         let end = integ.final_state(init, t).map_err(|e| e.to_string())?;
         Ok::<_, String>((counter() - before, end.stats.steps))
