@@ -1,5 +1,5 @@
 //! The one stepping loop of every model size (DESIGN §10): predictor, Newton solve of the
-//! step equations on a [`StepBackend`](crate::backend), compensated update, subdivision on
+//! step equations on a `StepBackend` (the `backend` module), compensated update, subdivision on
 //! failure, adaptive steps, diagnostics on request, and the checks that make every `Ok` step
 //! trustworthy. What differs between a small and a large model is the backend's linear
 //! algebra; everything here is written once, over slices.
