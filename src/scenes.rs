@@ -108,7 +108,7 @@ pub trait Scene: Send + Sync {
         member: usize,
     ) -> Result<Outcome, SceneError>;
     /// Runs a variational scheme adaptively at `rtol = atol = tol` to the final time, from
-    /// a first step of `t_final` (the controller shrinks it).
+    /// the automatic first step ([`Integrator::adaptive`]).
     fn run_adaptive(&self, scheme: &Scheme, tol: f64, member: usize)
         -> Result<Outcome, SceneError>;
     /// Runs a baseline at tolerance `tol` to the final time.
@@ -330,8 +330,7 @@ where
         tol: f64,
         member: usize,
     ) -> Result<Outcome, SceneError> {
-        let h0 = self.t_final;
-        let integ = Integrator::new(&self.model, scheme.clone(), h0)?.tolerances(tol, tol)?;
+        let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ, member)
     }
     fn run_baseline(

@@ -1,4 +1,4 @@
-//! Error control: the step-doubling estimate, tolerance proportionality, dense output and
+//! Error control: the reference-scheme estimate, tolerance proportionality, dense output and
 //! the typed errors of adaptive runs. `cargo test --release --test adaptive`.
 
 use forced_vi::prelude::*;
@@ -25,96 +25,146 @@ fn fixed(scheme: &Scheme, h: f64, t: f64) -> [f64; 4] {
     [end.q[0], end.q[1], end.p[0], end.p[1]]
 }
 
-fn max_diff(a: &[f64; 4], b: &[f64; 4]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+/// The RMS of the four components of `a − b`.
+fn rms_diff(a: &[f64; 4], b: &[f64; 4]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / 4.0).sqrt()
 }
 
-/// The estimate `(y₂ − y₁) / (2^p − 1)` of the local error of the two-half-step solution
-/// `y₂`, against that solution's true local error (the flow from the same state, by lobatto5
-/// with 256 substeps). It scales at order `p + 1` and stays within [0.1, 10] of the truth.
+/// `(q, p)` of `model` after steps of `h` to `t` from `(q0, v0)`: fixed, or adaptive with
+/// `rtol = 0`, `atol = 1e6` (one step when `h = t`), with the last record's error estimate
+/// times `atol`: the RMS of the estimated local error over `q` and `p`.
+fn end_state<M: ForcedLagrangian<2>>(
+    model: &M,
+    scheme: &Scheme,
+    (h, t): (f64, f64),
+    (q0, v0): ([f64; 2], [f64; 2]),
+    adaptive: bool,
+) -> ([f64; 4], f64) {
+    let mut integ = Integrator::new(model, scheme.clone(), h).unwrap();
+    if adaptive {
+        integ = integ.tolerances(0.0, 1e6).unwrap();
+    }
+    let run = integ.run(InitialState::from_velocity(q0, v0), t).unwrap();
+    if adaptive {
+        assert_eq!(run.records.len(), 2, "one step");
+    }
+    let end = run.last().unwrap();
+    (
+        [end.q[0], end.q[1], end.p[0], end.p[1]],
+        end.error_estimate * 1e6,
+    )
+}
+
+/// The estimate of an adaptive step (one Newton iteration of the reference Lobatto scheme of
+/// order `p + 2`), read from its record with `rtol = 0` (so the weighted norm is the plain
+/// RMS over `q` and `p`), against the step's true local error (the flow from the
+/// same state by lobatto5 with 256 substeps). Asymptotically correct: the ratio tends to 1
+/// as `h → 0`, on the coupled van der Pol model and on the damped oscillator.
 #[test]
 fn adaptive_estimate_tracks_the_true_local_error() {
-    for s in 2..=5 {
-        let scheme = Scheme::lobatto(s).unwrap();
-        let p = scheme.order() as i32;
-        let fine = Scheme::lobatto(5).unwrap();
-        let (mut hs, mut ests, mut truths) = (Vec::new(), Vec::new(), Vec::new());
-        let mut h: f64 = 0.4;
-        // Two decades of h, or as far as the local error stays above round-off.
-        while h > 0.4e-2 {
-            let y1 = fixed(&scheme, h, h);
-            let y2 = fixed(&scheme, 0.5 * h, h);
-            let exact = fixed(&fine, h / 256.0, h);
-            let est = max_diff(&y2, &y1) / (2f64.powi(p) - 1.0);
-            let truth = max_diff(&y2, &exact);
-            if truth < 1e-13 {
-                break;
+    let fine = Scheme::lobatto(5).unwrap();
+    let vdp = &CoupledVanDerPol::PAPER;
+    let osc = &DampedOscillator::DEFAULT;
+    type Step<'a> = &'a dyn Fn(&Scheme, (f64, f64), bool) -> ([f64; 4], f64);
+    let cases: [(&str, Step); 2] = [
+        ("van der Pol", &|sch, ht, ad| {
+            end_state(vdp, sch, ht, (PAPER_Q0, PAPER_V0), ad)
+        }),
+        ("damped oscillator", &|sch, ht, ad| {
+            end_state(osc, sch, ht, ([1.0, 0.0], [0.0, 0.5]), ad)
+        }),
+    ];
+    for (name, step) in cases {
+        // From where the local error of every scheme is above round-off at three steps.
+        let h_start = if name == "van der Pol" { 0.4 } else { 1.6 };
+        for s in 2..=5 {
+            let scheme = Scheme::lobatto(s).unwrap();
+            let p = scheme.order() as i32;
+            let (mut hs, mut ests, mut truths, mut ratios) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            let mut h: f64 = h_start;
+            // Two decades of h, or as far as the local error stays above round-off.
+            while h > 1e-2 * h_start {
+                let (y, _) = step(&scheme, (h, h), false);
+                // The flow over the step: lobatto5 with 256 substeps.
+                let (exact, _) = step(&fine, (h / 256.0, h), false);
+                let (_, est) = step(&scheme, (h, h), true);
+                let truth = rms_diff(&y, &exact);
+                if truth < 1e-13 {
+                    break;
+                }
+                let ratio = est / truth;
+                eprintln!(
+                    "{name} lobatto{s} h={h:.4} est={est:.3e} true={truth:.3e} ratio={ratio:.4}"
+                );
+                hs.push(h);
+                ests.push(est);
+                truths.push(truth);
+                ratios.push(ratio);
+                h /= 2.0;
             }
-            let ratio = est / truth;
-            eprintln!("lobatto{s} h={h:.4} est={est:.3e} true={truth:.3e} ratio={ratio:.3}");
             assert!(
-                (0.1..=10.0).contains(&ratio),
-                "lobatto{s} h={h}: estimate {est:e}, true {truth:e}"
+                hs.len() >= 3,
+                "{name} lobatto{s}: too few points above round-off"
             );
-            hs.push(h);
-            ests.push(est);
-            truths.push(truth);
-            h /= 2.0;
+            let (k, k_true) = (fit(&hs, &ests), fit(&hs, &truths));
+            eprintln!("{name} lobatto{s}: estimate order {k:.2}, true local error {k_true:.2}");
+            assert!(
+                (k - k_true).abs() <= 0.2,
+                "{name} lobatto{s}: {k} vs {k_true}"
+            );
+            // lobatto5's local error leaves round-off only above h = 0.1: its window is less
+            // than a decade and still pre-asymptotic (the true local error's own fit is 8.7).
+            let slack = if s == 5 { 0.5 } else { 0.3 };
+            assert!(k >= (p + 1) as f64 - slack, "{name} lobatto{s}: order {k}");
+            // Asymptotically correct: at the smallest step the ratio is within 5 % of 1.
+            let last = ratios[ratios.len() - 1];
+            assert!(
+                (last - 1.0).abs() <= 0.05,
+                "{name} lobatto{s}: ratio {last} at h = {}",
+                hs[hs.len() - 1]
+            );
         }
-        assert!(hs.len() >= 3, "lobatto{s}: too few points above round-off");
-        let (k, k_true) = (fit(&hs, &ests), fit(&hs, &truths));
-        eprintln!(
-            "lobatto{s}: estimate order {k:.2}, true local error {k_true:.2}, h = {}..{}",
-            hs[0],
-            hs[hs.len() - 1]
-        );
-        // It scales as the error it estimates, at order p + 1 or above (lobatto4's local
-        // error on this model is dominated by its h^{p+2} term at these h).
-        assert!((k - k_true).abs() <= 0.3, "lobatto{s}: {k} vs {k_true}");
-        // lobatto5's local error leaves round-off only above h = 0.1: its window is less
-        // than a decade and still pre-asymptotic (measured 8.6 against 9).
-        let slack = if s == 5 { 0.5 } else { 0.3 };
-        assert!(k >= (p + 1) as f64 - slack, "lobatto{s}: order {k}");
     }
 }
 
-/// On every report scene, the final error in q stays within 100·tol for rtol = atol from
-/// 1e-3 to 1e-12, and falls with the tolerance at a slope between 0.7 and 1.3.
+/// On every non-chaotic report scene, the final error in (q, p) stays within 10·tol for
+/// rtol = atol from 1e-3 to 1e-12 (automatic first step), and falls with the tolerance at a
+/// slope between 0.8 and 1.2.
 #[test]
 fn adaptive_tolerance_proportionality_on_the_report_scenes() {
     let tols: Vec<f64> = (3..=12).map(|k| 10f64.powi(-k)).collect();
-    // The five scenes of the error-control issue. The driven scenes came later; the
-    // chaotic Duffing oscillator amplifies any local error by e^{λT}, so no local-error
-    // controller keeps it within 100·tol at loose tolerances (lobatto5 at 1e-3: 9e-2).
-    let five = [
-        "coupled_van_der_pol",
-        "coupled_van_der_pol_ensemble",
-        "damped_oscillator",
-        "double_pendulum_friction",
-        "kepler_drag",
-    ];
+    // Every scene but the chaotic Duffing oscillator, which amplifies any local error by
+    // e^{λT} (its ratio to tol · amplification is the report's `chaos` table).
     for scene in scenes::all()
         .unwrap()
         .into_iter()
-        .filter(|s| five.contains(&s.name()))
+        .filter(|s| s.name() != "driven_duffing")
     {
         let reference = scene.reference(0).unwrap().clone();
         for s in 2..=5 {
             let scheme = Scheme::lobatto(s).unwrap();
             let (mut ts, mut errs) = (Vec::new(), Vec::new());
-            // lobatto2 needs 10⁷ steps at 1e-12; the test stops at 1e-9 (the report sweeps on).
-            for &tol in tols.iter().filter(|&&t| s > 2 || t >= 1e-9) {
+            // lobatto2 needs 10⁷ steps at 1e-12; the test stops at 1e-9 (the report sweeps
+            // on), and at 1e-6 on the Kapitza pendulum (10⁶ steps there). The Kapitza
+            // pendulum's forcing varies at a Ω³ ≈ 10⁴ per unit time: the round-off of a
+            // node's time (ε t) puts a noise of about ε t a Ω³ h into each step's momentum,
+            // which smaller steps do not reduce; at tol = 1e-12 lobatto3 ends in
+            // `StepSizeTooSmall` at t = 8 (measured), so the sweep stops at 1e-11 there.
+            let kapitza = scene.name() == "kapitza_pendulum";
+            let floor = match (s, kapitza) {
+                (2, true) => 1e-6,
+                (2, false) => 1e-9,
+                (_, true) => 1e-11,
+                _ => 0.0,
+            };
+            for &tol in tols.iter().filter(|&&t| t >= floor) {
                 let out = scene
                     .run_adaptive(&scheme, tol, 0)
                     .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
-                let err = out
-                    .end
-                    .q
-                    .iter()
-                    .zip(&reference.q)
+                // The tolerance applies to positions and momenta alike.
+                let err = (out.end.q.iter().zip(&reference.q))
+                    .chain(out.end.p.iter().zip(&reference.p))
                     .map(|(a, b)| (a - b).abs())
                     .fold(0.0, f64::max);
                 eprintln!(
@@ -123,7 +173,7 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes() {
                     out.steps
                 );
                 assert!(
-                    err <= 100.0 * tol,
+                    err <= 10.0 * tol,
                     "{} lobatto{s} tol {tol:e}: error {err:e}",
                     scene.name()
                 );
@@ -139,7 +189,7 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes() {
             let k = fit(&ts, &errs);
             eprintln!("{} lobatto{s}: slope {k:.2}", scene.name());
             assert!(
-                (0.7..=1.3).contains(&k),
+                (0.8..=1.2).contains(&k),
                 "{} lobatto{s}: slope {k}",
                 scene.name()
             );

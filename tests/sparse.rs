@@ -390,7 +390,7 @@ fn a_sparse_step_allocates_nothing() {
         let mut stepper = integ.stepper(FpuChain::<256>::initial(), 10.0).unwrap();
         assert_eq!(stepper.path(), LinearPath::Sparse);
         assert_eq!(allocations_in_steps(&mut stepper), 0, "chain, lobatto{s}");
-        // Adaptive steps (step doubling, rejections) allocate nothing either.
+        // Adaptive steps (the estimate's reference solve, rejections) allocate nothing either.
         let adaptive = integ.clone().tolerances(1e-6, 1e-6).unwrap();
         let mut stepper = adaptive.stepper(FpuChain::<256>::initial(), 10.0).unwrap();
         assert_eq!(

@@ -145,7 +145,17 @@ pub enum Error {
         /// Its absolute tolerance.
         atol: f64,
     },
-    /// An adaptive run needed a step below the smallest step that `f64` time can resolve.
+    /// The step bounds of an adaptive run are not `0 ≤ min_step ≤ max_step`, with
+    /// `min_step` finite and `max_step` positive.
+    #[error("step bounds min_step = {min_step}, max_step = {max_step} must satisfy 0 <= min_step <= max_step, min_step finite and max_step positive")]
+    InvalidStepBounds {
+        /// The smallest step.
+        min_step: f64,
+        /// The largest step.
+        max_step: f64,
+    },
+    /// An adaptive run needed a step below the smallest step that `f64` time can resolve,
+    /// or below its [`crate::StepOptions::min_step`].
     #[error("step size {h:e} at t = {t} is too small for the tolerance")]
     StepSizeTooSmall {
         /// Where the run stopped.
@@ -262,6 +272,7 @@ impl Error {
             Error::InvalidTolerance { .. } => "invalid_tolerance".into(),
             Error::UnorderedTimes => "unordered_times".into(),
             Error::StepSizeTooSmall { .. } => "step_size_too_small".into(),
+            Error::InvalidStepBounds { .. } => "invalid_step_bounds".into(),
             Error::MaxStepsReached { .. } => "max_steps_reached".into(),
             Error::InvalidNewtonOptions { .. } => "invalid_newton_options".into(),
             Error::TooManySteps { .. } => "too_many_steps".into(),

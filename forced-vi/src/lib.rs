@@ -54,7 +54,7 @@
 //! | the linear algebra of a step behind one trait: the dense and the sparse backend (DESIGN §10) | `backend` |
 //! | the one stepping loop of every model size: predictor, solve, update, subdivision, adaptive steps, checks | [`stepper`] |
 //! | records, energy and energy balance (DESIGN §4), run totals, [`RunFailure`] | [`trajectory`] |
-//! | error control: tolerances, step-doubling estimate, PI controller (DESIGN §8) | [`control`] |
+//! | error control: tolerances, the reference-scheme estimate, PI controller, first step (DESIGN §8) | [`control`] |
 //! | the integrator builder, the choice of backend ([`LinearPath`]), the run methods | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |

@@ -32,6 +32,10 @@ pub struct StepRecord<const N: usize> {
     pub residual: f64,
     /// Substeps used: 1 normally, 2, 4, … when the step was subdivided to recover.
     pub substeps: usize,
+    /// Adaptive runs: the estimated local error of this step, as the weighted RMS norm of
+    /// [`crate::control`] in units of the tolerance (per step, not per unit step); 0 for the
+    /// initial state and for fixed steps.
+    pub error_estimate: f64,
 }
 
 /// Totals over a run.

@@ -60,6 +60,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     }
 
     #[inline(always)]
+    fn scheme(&self) -> &Scheme {
+        self.prob.scheme
+    }
+
+    #[inline(always)]
     fn z(&self) -> &[f64] {
         self.z.as_slice()
     }

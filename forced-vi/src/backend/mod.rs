@@ -26,6 +26,7 @@ pub(crate) use sparse::SparseBackend;
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonReport;
+use crate::scheme::Scheme;
 
 /// Where the unknowns of a step live: the increment `Z_m = x_m − q_k` of control point
 /// `m = 1 … s − 1`, coordinate `a`, is entry [`Layout::at`]`(m, a)` of the backend's vector.
@@ -80,6 +81,8 @@ pub(crate) enum StepFailure {
 pub(crate) trait StepBackend {
     /// The layout of the unknowns.
     fn layout(&self) -> Layout;
+    /// The scheme whose step equations this backend solves.
+    fn scheme(&self) -> &Scheme;
     /// The unknowns: the predictor is written here, the solution read from here.
     fn z(&self) -> &[f64];
     /// The unknowns, to write.
@@ -153,6 +156,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn layout(&self) -> Layout {
         forward!(self, b => b.layout())
+    }
+    #[inline(always)]
+    fn scheme(&self) -> &Scheme {
+        forward!(self, b => b.scheme())
     }
     #[inline(always)]
     fn z(&self) -> &[f64] {

@@ -56,6 +56,11 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     #[inline(always)]
+    fn scheme(&self) -> &Scheme {
+        self.prob.scheme
+    }
+
+    #[inline(always)]
     fn z(&self) -> &[f64] {
         &self.z
     }

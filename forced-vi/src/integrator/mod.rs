@@ -51,6 +51,10 @@ pub struct Integrator<'m, M, const N: usize> {
     pub(crate) options: StepOptions,
     /// With tolerances the run is adaptive and `h` is only its first step.
     pub(crate) tolerance: Option<Tolerance<N>>,
+    /// Adaptive runs: the scheme of the error estimate ([`Scheme::error_reference`]).
+    pub(crate) reference: Option<Scheme>,
+    /// Adaptive runs: choose the first step from the initial data instead of `h`.
+    pub(crate) auto_first_step: bool,
     pub(crate) linear_path: LinearPath,
 }
 
@@ -63,6 +67,8 @@ impl<M, const N: usize> Clone for Integrator<'_, M, N> {
             h: self.h,
             options: self.options,
             tolerance: self.tolerance,
+            reference: self.reference.clone(),
+            auto_first_step: self.auto_first_step,
             linear_path: self.linear_path,
         }
     }
@@ -111,8 +117,35 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             h,
             options: StepOptions::default(),
             tolerance: None,
+            reference: None,
+            auto_first_step: false,
             linear_path: LinearPath::Auto,
         })
+    }
+
+    /// An adaptive integrator that needs no step size: steps keep the error within
+    /// `rtol · |y| + atol` (see [`Self::tolerances`]), and the first step is chosen from the
+    /// initial data (Hairer, Nørsett & Wanner's starting-step algorithm, see
+    /// [`crate::control`]).
+    ///
+    /// ```
+    /// use forced_vi::prelude::*;
+    /// # struct Oscillator;
+    /// # impl ForcedLagrangian<1> for Oscillator {
+    /// #     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+    /// #         (v[0] * v[0] - q[0] * q[0]) * 0.5
+    /// #     }
+    /// # }
+    /// let end = Integrator::adaptive(&Oscillator, Scheme::lobatto(4)?, 1e-9, 1e-9)?
+    ///     .final_state(InitialState::from_velocity([1.0], [0.0]), 10.0)
+    ///     .map_err(|f| f.error)?;
+    /// assert!((end.q[0] - 10f64.cos()).abs() < 1e-8);
+    /// # Ok::<(), forced_vi::Error>(())
+    /// ```
+    pub fn adaptive(model: &'m M, scheme: Scheme, rtol: f64, atol: f64) -> Result<Self, Error> {
+        let mut integ = Self::new(model, scheme, 1.0)?.tolerances(rtol, atol)?;
+        integ.auto_first_step = true;
+        Ok(integ)
     }
 
     /// Replaces the Newton options.
@@ -162,7 +195,25 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     #[must_use]
     pub fn tolerance(mut self, tolerance: Tolerance<N>) -> Self {
         self.tolerance = Some(tolerance);
+        self.reference = Some(self.scheme.error_reference());
         self
+    }
+
+    /// Adaptive runs: the largest step (default `∞`). Fails unless it is positive and at
+    /// least [`StepOptions::min_step`].
+    pub fn max_step(mut self, h: f64) -> Result<Self, Error> {
+        self.options.max_step = h;
+        self.options.check_step_bounds()?;
+        Ok(self)
+    }
+
+    /// Adaptive runs: the smallest step (default 0). A run that needs a smaller one (other
+    /// than to end on `t_final`) stops with [`Error::StepSizeTooSmall`]. Fails unless it is
+    /// finite, non-negative and at most [`StepOptions::max_step`].
+    pub fn min_step(mut self, h: f64) -> Result<Self, Error> {
+        self.options.min_step = h;
+        self.options.check_step_bounds()?;
+        Ok(self)
     }
 
     /// Chooses the linear algebra of the runs (default [`LinearPath::Auto`]).
@@ -193,14 +244,21 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// first, that holds only the current state. It runs on the backend that
     /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
-        let backend = self.backend(&init)?;
+        let newton = self.options.newton;
+        let backend = self.backend(&init, &self.scheme, newton)?;
+        // The error estimate's one Newton iteration (see `crate::control`).
+        let reference = match (&self.tolerance, &self.reference) {
+            (Some(_), Some(sch)) => Some(self.backend(&init, sch, newton.max_iterations(1))?),
+            _ => None,
+        };
         let setup = RunSetup {
             model: self.model,
             scheme: &self.scheme,
             h: self.h,
+            auto_first_step: self.auto_first_step,
             options: self.options,
             tolerance: self.tolerance,
         };
-        Stepper::new(setup, backend, init, t_final)
+        Stepper::new(setup, backend, reference, init, t_final)
     }
 }

@@ -6,6 +6,8 @@ use crate::backend::{Backend, DenseBackend};
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
+use crate::newton::NewtonOptions;
+use crate::scheme::Scheme;
 use crate::MAX_KERNEL_STACK;
 #[cfg(feature = "sparse")]
 use crate::{backend::SparseBackend, sparse::record_node_pattern};
@@ -64,17 +66,24 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// The backend a run from `init` takes ([`LinearPath::Dense`] or
     /// [`LinearPath::Sparse`]), or why it cannot run.
     pub fn path_for(&self, init: &InitialState<N>) -> Result<LinearPath, Error> {
-        Ok(match self.backend(init)? {
-            Backend::Dense(_) => LinearPath::Dense,
-            #[cfg(feature = "sparse")]
-            Backend::Sparse(_) => LinearPath::Sparse,
-        })
+        Ok(
+            match self.backend(init, &self.scheme, self.options.newton)? {
+                Backend::Dense(_) => LinearPath::Dense,
+                #[cfg(feature = "sparse")]
+                Backend::Sparse(_) => LinearPath::Sparse,
+            },
+        )
     }
 
-    /// The backend of a run from `init`, with its buffers.
-    pub(super) fn backend(&self, init: &InitialState<N>) -> Result<Backend<'_, M, N>, Error> {
+    /// The backend of a run from `init` with `scheme`, with its buffers.
+    pub(super) fn backend<'s>(
+        &'s self,
+        init: &InitialState<N>,
+        scheme: &'s Scheme,
+        newton: NewtonOptions,
+    ) -> Result<Backend<'s, M, N>, Error> {
         #[cfg(feature = "sparse")]
-        if let Some(backend) = self.sparse_backend(init)? {
+        if let Some(backend) = self.sparse_backend(init, scheme, newton)? {
             return Ok(Backend::Sparse(backend));
         }
         #[cfg(not(feature = "sparse"))]
@@ -86,15 +95,18 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         }
         check_dense::<M, N>()?;
         Ok(Backend::Dense(DenseBackend::new(
-            self.model,
-            &self.scheme,
-            self.options.newton,
+            self.model, scheme, newton,
         )))
     }
 
     /// The sparse backend if the run takes it.
     #[cfg(feature = "sparse")]
-    fn sparse_backend(&self, init: &InitialState<N>) -> Result<Option<SparseBackend<'_>>, Error> {
+    fn sparse_backend<'s>(
+        &'s self,
+        init: &InitialState<N>,
+        scheme: &'s Scheme,
+        newton: NewtonOptions,
+    ) -> Result<Option<SparseBackend<'s>>, Error> {
         let node = match (self.linear_path, self.model.sparse_node()) {
             (LinearPath::Dense, _) => return Ok(None),
             (LinearPath::Sparse, None) => {
@@ -128,8 +140,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             _ => {}
         }
         let constant_mass = M::STRUCTURE.constant_mass;
-        let newton = self.options.newton;
-        SparseBackend::new(node, &self.scheme, pattern, newton, constant_mass).map(Some)
+        SparseBackend::new(node, scheme, pattern, newton, constant_mass).map(Some)
     }
 }
 

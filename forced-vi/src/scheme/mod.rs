@@ -229,6 +229,15 @@ impl Scheme {
         }
     }
 
+    /// The scheme that estimates the local error of adaptive steps ([`crate::control`]):
+    /// the Lobatto scheme with `p / 2 + 2` control points, of order at least `p + 2` for a
+    /// scheme of order `p`. It may have one point more than [`MAX_STAGES`].
+    pub(crate) fn error_reference(&self) -> Scheme {
+        let s = self.order() / 2 + 2;
+        let (x, w) = lobatto_nodes_weights(s);
+        Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w)
+    }
+
     /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
     #[inline]
     pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {

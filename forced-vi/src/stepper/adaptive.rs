@@ -1,16 +1,18 @@
-//! Adaptive steps: step doubling, accepted when the error norm is at most one (see
-//! [`crate::control`]). The same on every backend.
+//! Adaptive steps (DESIGN §8): a step, its error estimate by one Newton iteration of the
+//! reference scheme, the controller's decision, and the automatic first step. The estimate
+//! and the controller are derived in [`crate::control`]. The same on every backend.
 
+use super::checks::step_count;
 use super::Stepper;
-use crate::backend::StepFailure;
+use crate::backend::{StepBackend, StepFailure};
 use crate::control::Tolerance;
-use crate::error::Error;
+use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::StepRecord;
 
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
-    /// One adaptive step from `t`: step doubling, accepted when the error norm is at most
-    /// one, retried with a smaller step otherwise (see [`crate::control`]).
+    /// One adaptive step from `t`: accepted when the estimated error per unit step is at
+    /// most one, retried with a smaller step otherwise (see [`crate::control`]).
     pub(super) fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<StepRecord<N>, Error> {
         let t0 = self.t;
         self.saved.copy_from(&self.state);
@@ -20,13 +22,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let mut last_failure = None;
         loop {
             let remaining = self.t_final - t0;
-            let mut h = self.h_next.min(remaining);
+            let mut h = self.h_next.min(remaining).min(self.options.max_step);
             // No sliver of a step at the end.
             let last = h >= remaining * (1.0 - 1e-10);
             if last {
                 h = remaining;
             }
-            if h < h_min || !h.is_finite() {
+            if h < h_min || !h.is_finite() || (!last && h < self.options.min_step) {
                 return Err(match last_failure {
                     Some(f) => self.failure_error(f, t0),
                     None => Error::StepSizeTooSmall { t: t0, h },
@@ -38,18 +40,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     steps: self.options.max_steps,
                 });
             }
-            match self.doubled(h, &mut iters) {
-                Ok(res) => {
-                    let err = tol.error_norm(
-                        self.scheme.order(),
-                        span / h,
-                        (&self.whole.0, &self.whole.1),
-                        (&self.state.q.sum, &self.state.p.sum),
-                    );
+            // Per unit step: the local errors of a run add up to about `tol`.
+            let per_unit = span / h;
+            let solved = self.attempt(h, &mut iters).and_then(|res| {
+                let err = self.estimate(h, per_unit, tol, &mut iters)?;
+                Ok((res, err))
+            });
+            match solved {
+                Ok((res, err)) => {
                     if err <= 1.0 {
+                        self.estimate = err / per_unit;
                         self.h_next = self.controller.accept(h, err);
                         self.t = if last { self.t_final } else { t0 + h };
-                        return self.finish_step(iters, res, 2);
+                        return self.finish_step(iters, res, 1);
                     }
                     self.h_next = self.controller.reject(h, err);
                 }
@@ -67,15 +70,134 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         }
     }
 
-    /// A step of `h` and two of `h/2` from the same state; leaves the state after the
-    /// halves, the whole step's `(q, p)` in `self.whole`, and returns the halves' last
-    /// residual.
-    fn doubled(&mut self, h: f64, iters: &mut usize) -> Result<f64, StepFailure> {
-        self.attempt(h, iters)?;
-        self.whole.0.copy_from_slice(&self.state.q.sum);
-        self.whole.1.copy_from_slice(&self.state.p.sum);
-        self.state.copy_from(&self.saved);
-        self.attempt(0.5 * h, iters)?;
-        self.attempt(0.5 * h, iters)
+    /// The weighted norm, per unit step, of the estimated local error of the step of size
+    /// `h` just taken from the saved state: the step polynomial, lifted to the reference
+    /// scheme's control points, improved by one Newton iteration of the reference's step
+    /// equations; the difference of the two ends in `(q, p)`.
+    fn estimate(
+        &mut self,
+        h: f64,
+        per_unit: f64,
+        tol: &Tolerance<N>,
+        iters: &mut usize,
+    ) -> Result<f64, StepFailure> {
+        let Some(reference) = self.reference.as_mut() else {
+            return Ok(0.0);
+        };
+        let s1 = self.scheme.stages() - 1;
+        let lay = self.backend.layout();
+        let z = self.backend.z();
+        let (lay_r, r1) = (reference.layout(), reference.scheme().stages() - 1);
+        let zr = reference.z_mut();
+        for j in 1..=r1 {
+            let row = &self.lift[(j - 1) * s1..j * s1];
+            for a in 0..N {
+                zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
+            }
+        }
+        let st = &self.saved;
+        let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
+        match reference.solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale) {
+            Ok(rep) => *iters += rep.iterations,
+            // One iteration is what the estimate asks for (its options cap it there).
+            Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
+                *iters += reference.last_iterations()
+            }
+            Err(f) => {
+                *iters += reference.last_iterations();
+                return Err(f);
+            }
+        }
+        let zr = reference.z();
+        let (eq, ep) = (&mut self.err.0, &mut self.err.1);
+        // Each difference less the round-off of the sums it compares (4ε of their terms'
+        // sizes): noise that smaller steps do not reduce must not count as error per unit
+        // step, or the step size would shrink without end.
+        let noise = 4.0 * f64::EPSILON;
+        for a in 0..N {
+            let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
+            eq[a] = ((x - y).abs() - noise * (x.abs() + y.abs())).max(0.0);
+        }
+        let (b, rs) = (self.scheme.b(), reference.scheme());
+        for (a, e) in ep.iter_mut().enumerate() {
+            let (mut d, mut size) = (self.dp[a], 0.0);
+            for (i, &bi) in b.iter().enumerate() {
+                size += (h * bi * self.backend.node_fq(i)[a]).abs();
+            }
+            for (i, &bi) in rs.b().iter().enumerate() {
+                let t = h * bi * reference.node_fq(i)[a];
+                d -= t;
+                size += t.abs();
+            }
+            *e = (d.abs() - noise * size).max(0.0);
+        }
+        let st = &self.state;
+        Ok(tol.error_norm(per_unit, (eq, ep), (&st.q.sum, &st.p.sum)))
+    }
+
+    /// The first step of an adaptive run, from the initial data (Hairer, Nørsett & Wanner,
+    /// *Solving ODEs I*, II.4): with `y = (q, p)` and `f = (v, L_q + F)` in the weighted
+    /// norm, `h₀ = 0.01 ‖y‖ / ‖f‖`, an Euler step of `h₀` to estimate `‖f'‖`, and
+    /// `h = min(100 h₀, (0.01 / max(‖f‖, ‖f'‖))^{1/(p+1)})`, within the step bounds.
+    pub(super) fn choose_first_step(&mut self) -> Result<(), Error> {
+        let Some(tol) = self.tolerance else {
+            return Ok(());
+        };
+        let span = self.t_final;
+        let (n, p) = (N, self.scheme.order() as f64);
+        let st = &self.state;
+        let (q0, p0, v0) = (st.q.sum.clone(), st.p.sum.clone(), st.v.clone());
+        let w = |i: usize, y: f64| tol.atol[i] + tol.rtol[i] * y.abs();
+        let rms = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
+            let sum: f64 = (0..n)
+                .map(|i| (a(i) / w(i, q0[i])).powi(2) + (b(i) / w(i, p0[i])).powi(2))
+                .sum();
+            (sum / (2 * n).max(1) as f64).sqrt()
+        };
+        let (mut fq0, mut lv) = (vec![0.0; n], vec![0.0; n]);
+        self.backend.gradient((0.0, &q0, &v0), &mut fq0, &mut lv)?;
+        let d0 = rms(&|i| q0[i], &|i| p0[i]);
+        let d1 = rms(&|i| v0[i], &|i| fq0[i]);
+        let cap = span.min(self.options.max_step);
+        let h0 = if d0 < 1e-5 || d1 < 1e-5 {
+            1e-6
+        } else {
+            0.01 * d0 / d1
+        }
+        .min(cap);
+        // One explicit Euler step of h₀: the derivative's rate of change.
+        let q1: Vec<f64> = (0..n).map(|i| q0[i] + h0 * v0[i]).collect();
+        let p1: Vec<f64> = (0..n).map(|i| p0[i] + h0 * fq0[i]).collect();
+        let mut v1 = v0.clone();
+        let mut fq1 = vec![0.0; n];
+        let probe = self
+            .backend
+            .velocity((h0, &q1, &p1), &mut v1, 0)
+            .and_then(|()| self.backend.gradient((h0, &q1, &v1), &mut fq1, &mut lv));
+        let h = match probe {
+            Ok(()) => {
+                let d2 = rms(&|i| v1[i] - v0[i], &|i| fq1[i] - fq0[i]) / h0;
+                let dmax = d1.max(d2);
+                let h1 = if dmax <= 1e-15 {
+                    (h0 * 1e-3).max(1e-6)
+                } else {
+                    (0.01 / dmax).powf(1.0 / (p + 1.0))
+                };
+                (100.0 * h0).min(h1)
+            }
+            // The probe left the model's domain: start from h₀ and let the controller go on.
+            Err(_) => h0,
+        }
+        .min(cap)
+        .max(self.options.min_step);
+        if !(h.is_finite() && h > 16.0 * f64::EPSILON * span) {
+            return Err(Error::StepSizeTooSmall { t: 0.0, h });
+        }
+        self.h = h;
+        self.h_next = h;
+        self.state.h_prev = h;
+        self.n_steps = step_count(span, h, usize::MAX)?;
+        Ok(())
     }
 }

@@ -9,7 +9,7 @@
 //! | the [`Stepper`] type, its records, its iterator, its stack guard; [`StepOptions`] | this one |
 //! | the start of a run: the checks, the initial state, the first record's data | `start` |
 //! | one step: Newton solve, update, the mass check; subdivision on failure | `advance` |
-//! | adaptive steps by step doubling (DESIGN §8) | `adaptive` |
+//! | adaptive steps: the reference-scheme estimate, the controller, the first step (DESIGN §8) | `adaptive` |
 //! | compensated sums and the state saved for retries | `state` |
 //! | the predictor from the previous step's polynomial | `predict` |
 //! | checks of a run, of initial data, of the time flag; step counts; non-finite values | `checks` |
@@ -45,6 +45,10 @@ pub struct StepOptions {
     /// The most steps a run may take; a longer run is refused before it starts
     /// ([`Error::TooManySteps`]).
     pub max_steps: usize,
+    /// Adaptive runs: the largest step (default `∞`).
+    pub max_step: f64,
+    /// Adaptive runs: the smallest step other than the last one (default 0).
+    pub min_step: f64,
 }
 
 impl StepOptions {
@@ -52,6 +56,19 @@ impl StepOptions {
     pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
     /// The most subdivision levels a step may use: 2²⁰ substeps.
     pub const MAX_SUBDIVISION_LEVELS: u32 = 20;
+
+    /// Checks `0 ≤ min_step ≤ max_step`, `min_step` finite, `max_step` positive.
+    pub fn check_step_bounds(&self) -> Result<(), Error> {
+        let (lo, hi) = (self.min_step, self.max_step);
+        if lo.is_finite() && lo >= 0.0 && hi > 0.0 && lo <= hi {
+            Ok(())
+        } else {
+            Err(Error::InvalidStepBounds {
+                min_step: lo,
+                max_step: hi,
+            })
+        }
+    }
 }
 
 impl Default for StepOptions {
@@ -60,6 +77,8 @@ impl Default for StepOptions {
             newton: NewtonOptions::default(),
             max_subdivisions: 0,
             max_steps: Self::DEFAULT_MAX_STEPS,
+            max_step: f64::INFINITY,
+            min_step: 0.0,
         }
     }
 }
@@ -69,6 +88,8 @@ pub(crate) struct RunSetup<'a, M, const N: usize> {
     pub(crate) model: &'a M,
     pub(crate) scheme: &'a Scheme,
     pub(crate) h: f64,
+    /// Adaptive runs: the first step from the initial data, not `h`.
+    pub(crate) auto_first_step: bool,
     pub(crate) options: StepOptions,
     pub(crate) tolerance: Option<Tolerance<N>>,
 }
@@ -109,6 +130,11 @@ pub struct Stepper<'a, M, const N: usize> {
     model: &'a M,
     scheme: &'a Scheme,
     backend: Backend<'a, M, N>,
+    /// Adaptive runs: the error estimate's backend, on [`Scheme::error_reference`], and
+    /// `ℓ_m(d'_j)`, the step polynomial at its control points (row `j − 1`, column
+    /// `m − 1`).
+    reference: Option<Backend<'a, M, N>>,
+    lift: Vec<f64>,
     options: StepOptions,
     h: f64,
     t_final: f64,
@@ -120,21 +146,23 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Sign of the mass matrix's determinant at the start: a step that changes it has
     /// crossed a singular mass.
     mass_sign: f64,
-    /// Scratch of `N` entries: the end of a step's positions, its velocity, and the whole
-    /// step's `(q, p)` of step doubling.
+    /// Scratch of `N` entries: the end of a step's positions, its velocity, and the
+    /// estimated local error of `(q, p)`.
     q_end: Vec<f64>,
     v_end: Vec<f64>,
     /// Scratch: the momentum update of a step.
     dp: Vec<f64>,
     /// Scratch: the predictor's basis values at one control point (entry `m = 1 … s − 1`).
     basis: Vec<f64>,
-    whole: (Vec<f64>, Vec<f64>),
+    err: (Vec<f64>, Vec<f64>),
     /// The time of the record last handed out.
     t: f64,
     /// Adaptive runs: the tolerances, the controller and the next step to try.
     tolerance: Option<Tolerance<N>>,
     controller: Controller,
     h_next: f64,
+    /// The last accepted step's [`StepRecord::error_estimate`].
+    estimate: f64,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
     /// The stack a step needs ([`step_stack_bytes`]).
@@ -201,6 +229,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             newton_iterations,
             residual,
             substeps,
+            error_estimate: self.estimate,
         }
     }
 

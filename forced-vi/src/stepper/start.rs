@@ -17,16 +17,25 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     pub(crate) fn new(
         setup: RunSetup<'a, M, N>,
         backend: Backend<'a, M, N>,
+        reference: Option<Backend<'a, M, N>>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Self, Error> {
         let stack = step_stack_bytes::<M, N>(backend.deep_stack());
-        with_stack(stack, || Self::start(setup, backend, init, t_final, stack))
+        let auto = setup.auto_first_step;
+        with_stack(stack, || {
+            let mut stepper = Self::start(setup, backend, reference, init, t_final, stack)?;
+            if auto && stepper.tolerance.is_some() {
+                stepper.choose_first_step()?;
+            }
+            Ok(stepper)
+        })
     }
 
     fn start(
         setup: RunSetup<'a, M, N>,
         mut backend: Backend<'a, M, N>,
+        reference: Option<Backend<'a, M, N>>,
         init: InitialState<N>,
         t_final: f64,
         stack: usize,
@@ -37,8 +46,19 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             h,
             options,
             tolerance,
+            ..
         } = setup;
         check_run(&options, t_final)?;
+        options.check_step_bounds()?;
+        // The step polynomial at the error reference's control points.
+        let mut lift = Vec::new();
+        if let Some(r) = &reference {
+            let s1 = scheme.stages() - 1;
+            let d = r.scheme().d();
+            for &dj in &d[1..] {
+                lift.extend((1..=s1).map(|m| scheme.basis_at(dj, m)));
+            }
+        }
         let n_steps = match tolerance {
             // Adaptive: the count is not known; the cap is checked as the run goes.
             Some(_) => step_count(t_final, h, usize::MAX)?,
@@ -56,6 +76,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             model,
             scheme,
             backend,
+            reference,
+            lift,
             options,
             h,
             t_final,
@@ -69,11 +91,12 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             v_end: vec![0.0; N],
             dp: vec![0.0; N],
             basis: vec![0.0; scheme.stages()],
-            whole: (vec![0.0; N], vec![0.0; N]),
+            err: (vec![0.0; N], vec![0.0; N]),
             t: 0.0,
             tolerance,
             controller: Controller::new(scheme.order()),
-            h_next: h,
+            h_next: h.min(options.max_step),
+            estimate: 0.0,
             lean: false,
             stack,
             stats: RunStats::default(),

@@ -178,11 +178,11 @@ pub fn stiff_cost(s: &Summary) -> String {
     md.push_str(
         "\nWhat limits it, read from the table rather than assumed: the time ratio is the \
          ratio of step counts times the ratio of cost per step. The `steps` columns give the \
-         first; the cost per step of the variational run includes three step solves (step \
-         doubling) of an s-stage Galerkin system with Newton, against one BDF step (which \
-         typically reuses its Jacobian). Where the best adaptive run is far more accurate than the target \
+         first; the cost per step of the variational run is one step solve of an s-stage Galerkin \
+         system with Newton and one Newton iteration of the (s+1)-stage reference scheme for \
+         the estimate, against one BDF step (which typically reuses its Jacobian). Where the best adaptive run is far more accurate than the target \
          (its tolerance is the loosest swept, yet err_final is orders below it), the \
-         controller over-resolves, probably because the step-doubling estimate measures the local error of \
+         controller over-resolves, probably because the estimate measures the local error of \
          the propagated solution, which is larger than the global error left after the \
          dissipative fast mode damps it.\n\n",
     );

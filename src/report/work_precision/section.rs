@@ -264,14 +264,14 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
         .collect();
     let mut md = format!(
         "\n### Adaptive runs: tolerance proportionality\n\n\
-         Each variational scheme also runs with error control (`Integrator::tolerances`, \
-         step-doubling estimate, PI controller) at rtol = atol = tol for tol in {{{}}}, from a \
-         first step of T (`mode = adaptive` in `work_precision.csv`, `h_or_tol` = tol). \
+         Each variational scheme also runs with error control (`Integrator::adaptive`: the \
+         reference-scheme estimate, PI controller, automatic first step) at rtol = atol = tol \
+         for tol in {{{}}} (`mode = adaptive` in `work_precision.csv`, `h_or_tol` = tol). \
          The second-order schemes (`lobatto2`, `midpoint`) stop at tol = {ORDER2_TOL_FLOOR:.0e}: \
          below it they need millions of steps (about 10⁷ at 10⁻¹²). Sweeps stop early in the \
          same ways as the fixed-step ones. Slope: least-squares slope of log err_q against \
-         log tol over the points above the round-off floor (target 0.7–1.3); worst err/tol: the largest final error in q \
-         over its tolerance (target ≤ 100).\n\n",
+         log tol over the points above the round-off floor (target 0.8–1.2); worst err/tol: the largest final error in q \
+         over its tolerance (target ≤ 10).\n\n",
         tols.join(", ")
     );
     md.push_str(&markdown(
