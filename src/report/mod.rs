@@ -7,7 +7,7 @@
 //!   README.md              assembled from sections/ (never edit by hand)
 //!   sections/<name>.md     one Markdown section per command
 //!   work_precision.csv     scene,method,h_or_tol,steps,newton_iters,seconds,err_q,err_p,err_energy
-//!   orders.csv             scene,method,stages,expected_order,observed_order
+//!   orders.csv             scene,method,stages,expected_order,observed_order,note
 //!   ensemble.csv           min/mean/max errors over the ensemble members
 //!   energy_balance.csv     the long run's energy-balance error against time
 //!   *.svg                  plots, embedded in README.md

@@ -121,6 +121,8 @@ pub struct OrderRow {
     pub expected: usize,
     /// Observed orders in q, p and energy.
     pub observed: [Option<Fit>; 3],
+    /// Why the order in q is blank or off: empty when it is within 0.3 of `expected`.
+    pub note: String,
 }
 
 /// One curve of the energy-balance plot.
@@ -281,6 +283,8 @@ pub struct OrderRecord {
     pub expected_order: usize,
     /// The observed order in q, `{:.3}`.
     pub observed_order: String,
+    /// Why the order is blank (or off by more than 0.3); empty otherwise.
+    pub note: String,
 }
 
 impl From<&OrderRow> for OrderRecord {
@@ -293,6 +297,7 @@ impl From<&OrderRow> for OrderRecord {
             observed_order: o.observed[0]
                 .as_ref()
                 .map_or(String::new(), |f| format!("{:.3}", f.order)),
+            note: o.note.clone(),
         }
     }
 }

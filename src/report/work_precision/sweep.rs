@@ -227,6 +227,39 @@ fn sweep(scene: &dyn Scene, method: &Method, mode: Mode, plan: &Plan) -> Swept {
     out
 }
 
+/// Why an order in q is blank or off (empty when it is within 0.3 of `expected`): the
+/// sweep's points, and how many lie between the round-off floor and the ceiling of the rule
+/// (`orders`).
+fn order_note(
+    pts: &[(f64, f64)],
+    fit: Option<&orders::Fit>,
+    expected: usize,
+    scale: f64,
+) -> String {
+    let s = scale.max(1.0);
+    let inside = pts
+        .iter()
+        .filter(|&&(_, e)| e.is_finite() && e >= orders::FLOOR * s && e <= orders::CEILING * s)
+        .count();
+    match fit {
+        Some(f) if (f.order - expected as f64).abs() <= 0.3 => String::new(),
+        Some(f) => format!(
+            "off by {:.2} over {} points (h = {:.3e}..{:.3e})",
+            f.order - expected as f64,
+            f.used.len(),
+            f.used[f.used.len() - 1].0,
+            f.used[0].0
+        ),
+        None if pts.is_empty() => "no fixed-step run".into(),
+        None => format!(
+            "blank: {inside} of {} runs have errors between the round-off floor and the \
+             pre-asymptotic ceiling, fewer of them where the error still falls; a fit needs {}",
+            pts.len(),
+            orders::MIN_POINTS
+        ),
+    }
+}
+
 /// Fits the observed orders of every variational method on every scene.
 pub fn fit_orders(scenes: &[&dyn Scene], summary: &mut Summary) {
     for scene in scenes {
@@ -238,22 +271,25 @@ pub fn fit_orders(scenes: &[&dyn Scene], summary: &mut Summary) {
             let Ok(scheme) = Scheme::new(id) else {
                 continue;
             };
-            let observed = [0, 1, 2].map(|k| {
-                let pts: Vec<(f64, f64)> = summary
+            let points = |k: usize| -> Vec<(f64, f64)> {
+                summary
                     .rows
                     .iter()
                     .filter(|r| r.scene == scene.name() && r.method == method)
                     .filter(|r| r.mode == Mode::Fixed)
                     .map(|r| (r.h_or_tol, r.errors()[k]))
-                    .collect();
-                orders::observed_order(&pts, scale[k])
-            });
+                    .collect()
+            };
+            let observed = [0, 1, 2].map(|k| orders::observed_order(&points(k), scale[k]));
+            let expected = scheme.order();
+            let note = order_note(&points(0), observed[0].as_ref(), expected, scale[0]);
             summary.orders.push(OrderRow {
                 scene: scene.name(),
                 method,
                 stages: scheme.stages(),
-                expected: scheme.order(),
+                expected,
                 observed,
+                note,
             });
         }
     }
