@@ -309,3 +309,84 @@ fn adaptive_typed_errors_keep_the_steps_before_them() {
         assert!(matches!(e, Error::InvalidTolerance { .. }));
     }
 }
+
+/// `Integrator::adaptive` needs no step: the first step comes from the initial data, is
+/// accepted or shrunk a few times at most, and the run meets its tolerance.
+#[test]
+fn adaptive_first_step_is_automatic() {
+    for tol in [1e-3, 1e-6, 1e-9] {
+        for s in 2..=5 {
+            let integ = Integrator::adaptive(
+                &CoupledVanDerPol::PAPER,
+                Scheme::lobatto(s).unwrap(),
+                tol,
+                tol,
+            )
+            .unwrap();
+            let run = integ
+                .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 1.0)
+                .unwrap();
+            let end = run.last().unwrap();
+            let exact = fixed(&Scheme::lobatto(5).unwrap(), 1e-3, 1.0);
+            let err = (end.q[0] - exact[0]).abs().max((end.q[1] - exact[1]).abs());
+            eprintln!(
+                "lobatto{s} tol {tol:e}: first step {:.3e}, {} steps, {} rejected, err {err:.2e}",
+                run.records[1].t,
+                run.stats.steps,
+                run.stats.rejected_steps
+            );
+            assert!(err <= 10.0 * tol, "lobatto{s} tol {tol:e}: {err:e}");
+            assert!(run.stats.rejected_steps <= 3, "lobatto{s} tol {tol:e}");
+        }
+    }
+}
+
+/// `max_step` caps every step, `min_step` stops a run that needs less with the steps so far
+/// kept, and bounds out of order, negative or NaN are typed errors before any step.
+#[test]
+fn adaptive_step_bounds() {
+    let init = InitialState::from_velocity(PAPER_Q0, PAPER_V0);
+    let base = || {
+        Integrator::adaptive(
+            &CoupledVanDerPol::PAPER,
+            Scheme::lobatto(3).unwrap(),
+            1e-6,
+            1e-6,
+        )
+        .unwrap()
+    };
+    let run = base().max_step(0.01).unwrap().run(init, 1.0).unwrap();
+    assert!(run.records.windows(2).all(|w| w[1].t - w[0].t <= 0.01 * (1.0 + 1e-12)));
+    assert!(run.stats.steps >= 100);
+    // This run's steps are about 0.03 (33 steps): a floor of 0.1 cannot be kept.
+    let f = base().min_step(0.1).unwrap().run(init, 1.0).unwrap_err();
+    assert!(
+        matches!(f.error, Error::StepSizeTooSmall { .. }),
+        "{}",
+        f.error
+    );
+    assert!(!f.trajectory.records.is_empty());
+    for (lo, hi) in [(0.1, 0.01), (-1.0, 1.0), (f64::NAN, 1.0), (0.0, 0.0), (0.0, f64::NAN)] {
+        let e = base().min_step(lo).and_then(|i| i.max_step(hi));
+        assert!(
+            matches!(e, Err(Error::InvalidStepBounds { .. })),
+            "{lo} {hi}: {e:?}"
+        );
+    }
+    for (r, a) in [(-1.0, 1e-6), (f64::NAN, 1e-6), (0.0, 0.0), (1e-6, f64::INFINITY)] {
+        let e = Integrator::adaptive(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), r, a);
+        assert!(matches!(e, Err(Error::InvalidTolerance { .. })), "{r} {a}");
+    }
+    // A first step that underflows (tolerances far below round-off ask for ~1e-60): a typed
+    // error before any step.
+    let f = Integrator::adaptive(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.0, 1e-300)
+        .unwrap()
+        .run(init, 1.0)
+        .unwrap_err();
+    assert!(
+        matches!(f.error, Error::StepSizeTooSmall { t, .. } if t == 0.0),
+        "{}",
+        f.error
+    );
+    assert!(f.trajectory.records.len() <= 1);
+}
