@@ -331,9 +331,7 @@ fn adaptive_first_step_is_automatic() {
             let err = (end.q[0] - exact[0]).abs().max((end.q[1] - exact[1]).abs());
             eprintln!(
                 "lobatto{s} tol {tol:e}: first step {:.3e}, {} steps, {} rejected, err {err:.2e}",
-                run.records[1].t,
-                run.stats.steps,
-                run.stats.rejected_steps
+                run.records[1].t, run.stats.steps, run.stats.rejected_steps
             );
             assert!(err <= 10.0 * tol, "lobatto{s} tol {tol:e}: {err:e}");
             assert!(run.stats.rejected_steps <= 3, "lobatto{s} tol {tol:e}");
@@ -356,7 +354,10 @@ fn adaptive_step_bounds() {
         .unwrap()
     };
     let run = base().max_step(0.01).unwrap().run(init, 1.0).unwrap();
-    assert!(run.records.windows(2).all(|w| w[1].t - w[0].t <= 0.01 * (1.0 + 1e-12)));
+    assert!(run
+        .records
+        .windows(2)
+        .all(|w| w[1].t - w[0].t <= 0.01 * (1.0 + 1e-12)));
     assert!(run.stats.steps >= 100);
     // This run's steps are about 0.03 (33 steps): a floor of 0.1 cannot be kept.
     let f = base().min_step(0.1).unwrap().run(init, 1.0).unwrap_err();
@@ -366,23 +367,39 @@ fn adaptive_step_bounds() {
         f.error
     );
     assert!(!f.trajectory.records.is_empty());
-    for (lo, hi) in [(0.1, 0.01), (-1.0, 1.0), (f64::NAN, 1.0), (0.0, 0.0), (0.0, f64::NAN)] {
+    for (lo, hi) in [
+        (0.1, 0.01),
+        (-1.0, 1.0),
+        (f64::NAN, 1.0),
+        (0.0, 0.0),
+        (0.0, f64::NAN),
+    ] {
         let e = base().min_step(lo).and_then(|i| i.max_step(hi));
         assert!(
             matches!(e, Err(Error::InvalidStepBounds { .. })),
             "{lo} {hi}: {e:?}"
         );
     }
-    for (r, a) in [(-1.0, 1e-6), (f64::NAN, 1e-6), (0.0, 0.0), (1e-6, f64::INFINITY)] {
+    for (r, a) in [
+        (-1.0, 1e-6),
+        (f64::NAN, 1e-6),
+        (0.0, 0.0),
+        (1e-6, f64::INFINITY),
+    ] {
         let e = Integrator::adaptive(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), r, a);
         assert!(matches!(e, Err(Error::InvalidTolerance { .. })), "{r} {a}");
     }
     // A first step that underflows (tolerances far below round-off ask for ~1e-60): a typed
     // error before any step.
-    let f = Integrator::adaptive(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.0, 1e-300)
-        .unwrap()
-        .run(init, 1.0)
-        .unwrap_err();
+    let f = Integrator::adaptive(
+        &CoupledVanDerPol::PAPER,
+        Scheme::lobatto(3).unwrap(),
+        0.0,
+        1e-300,
+    )
+    .unwrap()
+    .run(init, 1.0)
+    .unwrap_err();
     assert!(
         matches!(f.error, Error::StepSizeTooSmall { t, .. } if t == 0.0),
         "{}",

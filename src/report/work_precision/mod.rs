@@ -39,6 +39,7 @@ use crate::report::{readme, Method, Options, ReportError};
 use crate::scenes::{self, Scene};
 
 pub mod figures;
+pub mod large;
 pub mod long_run;
 pub mod rows;
 pub mod section;
@@ -137,6 +138,15 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
                 curves: curves.into_iter().flatten().collect(),
             }
         });
+    let large_selected = [large::FPU_CHAIN, large::LATTICE_2D]
+        .iter()
+        .any(|n| opts.scenes.is_empty() || opts.scenes.iter().any(|s| s == n));
+    if !opts.quick && large_selected {
+        let (rows, failures, accuracy) = large::measure();
+        summary.rows.extend(rows);
+        summary.failures.extend(failures);
+        summary.large = accuracy;
+    }
     sweep::fit_orders(&selected, &mut summary);
     summary.elapsed = started.elapsed().as_secs_f64();
     write_outputs(opts, &plan, &selected, &summary)?;

@@ -168,6 +168,9 @@ pub struct Summary {
     pub orders: Vec<OrderRow>,
     /// The long run, if its scene was selected.
     pub long_run: Option<LongRun>,
+    /// The large models' scene names and their references' own accuracy (empty when they
+    /// were not run: `--quick`, or a `--scene` filter that names none of them).
+    pub large: Vec<(&'static str, f64)>,
     /// Wall time of the whole report in seconds.
     pub elapsed: f64,
 }

@@ -5,8 +5,9 @@ use std::fmt::Write as _;
 use forced_vi::Scheme;
 
 use super::figures::{Figures, BALANCE_FLOOR};
+use super::large;
 use super::long_run::LONG_RUN_REFERENCE_H;
-use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Summary};
+use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Row, Summary};
 use super::sweep::reference_scale;
 use crate::report::orders::{self, Fit};
 use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
@@ -38,6 +39,7 @@ pub fn markdown_section(i: &Inputs<'_>) -> String {
     md.push_str(&observed_orders(i.summary));
     md.push_str(&adaptive(i.plan, i.scenes, i.summary));
     md.push_str(&cheapest(i.scenes, i.summary));
+    md.push_str(&large_models(i.summary));
     md.push_str(&plots(i.scenes, i.figures));
     if let (Some(lr), Some(fig)) = (&i.summary.long_run, &i.figures.energy_balance) {
         md.push_str(&long_run(lr, fig));
@@ -428,5 +430,89 @@ fn long_run(lr: &LongRun, fig: &str) -> String {
     ));
     md.push('\n');
     md.push_str(&ledger_under_adaptivity(lr));
+    md
+}
+
+/// The time a fixed-step curve `(err, seconds)` takes to reach `err`: log-log interpolation
+/// between the two fixed runs around it; `None` outside the curve.
+fn fixed_time_at(fixed: &[&Row], err: f64) -> Option<f64> {
+    let mut pts: Vec<(f64, f64)> = fixed.iter().map(|r| (r.errors()[0], r.seconds)).collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts.windows(2).find_map(|w| {
+        let ((e0, t0), (e1, t1)) = (w[0], w[1]);
+        (e0 <= err && err <= e1 && e0 > 0.0).then(|| {
+            let x = if e1 > e0 {
+                (err / e0).ln() / (e1 / e0).ln()
+            } else {
+                0.0
+            };
+            (t0.ln() + x * (t1.ln() - t0.ln())).exp()
+        })
+    })
+}
+
+fn large_models(summary: &Summary) -> String {
+    if summary.large.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "\n### Large models: fixed and adaptive steps\n\n\
+         The FPU chain and the 2-D lattice at n = 1024 (`forced_vi_scenes::large`, sparse \
+         backend), T = {} and {}, from their smooth \
+         initial states: lobatto3 and lobatto4 with fixed \
+         steps h = T/n, n ∈ {:?}, and adaptive (`Integrator::adaptive`, rtol = atol = tol) \
+         for tol ∈ {:?}. Errors (max-norm, q) against lobatto5 with {} fixed steps, whose own \
+         accuracy (its difference from lobatto5 at half the steps) is {}. `fixed at equal \
+         error`: the time of the fixed-step curve at the adaptive run's error (log-log \
+         interpolation between the fixed runs around it; – outside the curve). Rows in \
+         `work_precision.csv` under the scene names `{}` and `{}`.\n\n",
+        large::t_final(large::FPU_CHAIN),
+        large::t_final(large::LATTICE_2D),
+        large::FIXED_STEPS,
+        large::TOLERANCES,
+        large::REFERENCE_STEPS,
+        summary
+            .large
+            .iter()
+            .map(|(n, a)| format!("{a:.1e} (`{n}`)"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        large::FPU_CHAIN,
+        large::LATTICE_2D,
+    );
+    md.push_str(
+        "| scene | method | tol | steps | time | err_q | fixed at equal error | ratio |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for (scene, _) in &summary.large {
+        for method in summary
+            .rows
+            .iter()
+            .filter(|r| r.scene == *scene)
+            .map(|r| r.method)
+            .fold(Vec::new(), |mut v, m| {
+                if !v.contains(&m) {
+                    v.push(m);
+                }
+                v
+            })
+        {
+            let fixed = summary.rows_in(scene, &method, Mode::Fixed);
+            for r in summary.rows_in(scene, &method, Mode::Adaptive) {
+                let err = r.errors()[0];
+                let equal = fixed_time_at(&fixed, err);
+                md.push_str(&format!(
+                    "| `{scene}` | `{}` | {:.0e} | {} | {} | {:.2e} | {} | {} |\n",
+                    method.name(),
+                    r.h_or_tol,
+                    r.steps,
+                    fmt_time(r.seconds),
+                    err,
+                    equal.map_or("–".into(), fmt_time),
+                    equal.map_or("–".into(), |t| format!("{:.2}", r.seconds / t)),
+                ));
+            }
+        }
+    }
     md
 }
