@@ -83,7 +83,7 @@ impl Common {
             adaptive_tols: if self.quick {
                 vec![1e-3, 1e-5]
             } else {
-                (3..=8).map(|k| 10f64.powi(-k)).collect()
+                (1..=8).map(|k| 10f64.powi(-k)).collect()
             },
             adaptive_methods: if self.quick {
                 vec![SchemeId::Lobatto(3)]
