@@ -87,7 +87,9 @@ pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
 pub use stepper::Stepper;
-pub use trajectory::{DenseState, FinalState, RunFailure, RunStats, StepRecord, Trajectory};
+pub use trajectory::{
+    DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord, Trajectory,
+};
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.
 ///

@@ -1,7 +1,7 @@
 //! What a run hands back: records with their diagnostics (DESIGN §4), run totals,
 //! trajectories and failures that keep what was computed.
 
-use nalgebra::SVector;
+use nalgebra::{DMatrix, SVector};
 
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
@@ -111,6 +111,34 @@ pub struct FinalState<const N: usize> {
     pub v: SVector<f64, N>,
     /// Energy `v · L_v − L`.
     pub energy: f64,
+    /// Totals.
+    pub stats: RunStats,
+}
+
+/// The end of a sensitivity run ([`crate::Integrator::sensitivities`]): the final state and
+/// the derivatives of the discrete flow (DESIGN §12).
+///
+/// The derivatives are those of the scheme's map itself, carried through every accepted
+/// step with the factored step Jacobian (the implicit function theorem), not finite
+/// differences. In an adaptive run the step sequence is held fixed: the derivative is that
+/// of the same sequence of steps from perturbed data, not of the controller's choices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sensitivities<const N: usize> {
+    /// The final time.
+    pub t: f64,
+    /// Final positions.
+    pub q: SVector<f64, N>,
+    /// Final velocities.
+    pub v: SVector<f64, N>,
+    /// Final momenta.
+    pub p: SVector<f64, N>,
+    /// `∂(q_T, v_T)/∂(q_0, v_0)`, `2N × 2N`: rows `q_T` then `v_T`, columns `q_0` then `v_0`.
+    /// The initial data is taken as velocities (through `p_0 = L_v(q_0, v_0)`) and the
+    /// final velocities through the velocity solve `L_v(q_T, v_T) = p_T`, whichever form
+    /// the run was started from.
+    pub wrt_initial: DMatrix<f64>,
+    /// `∂(q_T, v_T)/∂θ`, `2N × P`, for the model's parameters `θ`.
+    pub wrt_parameters: DMatrix<f64>,
     /// Totals.
     pub stats: RunStats,
 }

@@ -7,7 +7,7 @@ use super::{Layout, StepBackend, StepFailure};
 use crate::error::Error;
 use crate::initial::{mass_check, mass_factor, solve_velocity, MIN_MASS_RCOND};
 use crate::model::ForcedLagrangian;
-use crate::newton::{Newton, NewtonOptions, NewtonReport};
+use crate::newton::{solve_small, Newton, NewtonOptions, NewtonReport};
 use crate::scalar::all_finite;
 use crate::scheme::Scheme;
 use crate::step_equations::StepProblem;
@@ -17,6 +17,8 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     prob: StepProblem<'a, M, N>,
     newton: Newton,
     z: DVector<f64>,
+    /// The right-hand side of a tangent solve (made on the first one).
+    rhs: DVector<f64>,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
@@ -43,6 +45,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             },
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
+            rhs: DVector::zeros(0),
         }
     }
 }
@@ -163,6 +166,68 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
                 };
                 Err(StepFailure::SingularMass { rcond })
             }
+        }
+    }
+
+    fn linearize(&mut self) -> Result<(), StepFailure> {
+        self.newton
+            .factor_at(&mut self.prob, &self.z)
+            .map_err(StepFailure::Newton)
+    }
+
+    fn apply_node(&self, i: usize, (dx, dv): (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
+        let Some(nj) = self.prob.jacs.get(i) else {
+            dfq.fill(f64::NAN);
+            dlv.fill(f64::NAN);
+            return;
+        };
+        let (dx, dv) = (vector::<N>(dx), vector::<N>(dv));
+        dfq.copy_from_slice((nj.a * dx + nj.b * dv).as_slice());
+        dlv.copy_from_slice((nj.c * dx + nj.e * dv).as_slice());
+    }
+
+    fn solve_linearized(&mut self, b: &mut [f64]) {
+        if self.rhs.len() != b.len() {
+            self.rhs = DVector::zeros(b.len());
+        }
+        self.rhs.as_mut_slice().copy_from_slice(b);
+        self.newton.solve_factored(&mut self.rhs);
+        b.copy_from_slice(self.rhs.as_slice());
+    }
+
+    fn momentum_tangent(
+        &mut self,
+        (t, q, v): (f64, &[f64], &[f64]),
+        (dq, dv): (&[f64], &[f64]),
+        dp: &mut [f64],
+    ) -> Result<(), Error> {
+        let nj = self.prob.model.node_jacobian_at(t, &vector(q), &vector(v));
+        let out = nj.c * vector::<N>(dq) + nj.e * vector::<N>(dv);
+        if !all_finite(&out) {
+            return Err(Error::NonFiniteModel { step: 0, t });
+        }
+        dp.copy_from_slice(out.as_slice());
+        Ok(())
+    }
+
+    fn velocity_tangent(
+        &mut self,
+        (t, q, v): (f64, &[f64], &[f64]),
+        (dq, dp): (&[f64], &[f64]),
+        dv: &mut [f64],
+    ) -> Result<(), Error> {
+        let nj = self.prob.model.node_jacobian_at(t, &vector(q), &vector(v));
+        let rhs = vector::<N>(dp) - nj.c * vector::<N>(dq);
+        match solve_small(&nj.e, &rhs) {
+            Some((x, rcond)) if rcond >= MIN_MASS_RCOND && all_finite(&x) => {
+                dv.copy_from_slice(x.as_slice());
+                Ok(())
+            }
+            other => Err(Error::SingularMassMatrix {
+                step: 0,
+                t,
+                rcond: other.map_or(0.0, |(_, rc)| rc),
+            }),
         }
     }
 

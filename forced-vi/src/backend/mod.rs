@@ -124,6 +124,30 @@ pub(crate) trait StepBackend {
     /// Checks the mass matrix at a step's end: regular, with the determinant's sign
     /// `sign` of the start (a change means a singular mass was crossed).
     fn mass_at_end(&mut self, at: (f64, &[f64], &[f64]), sign: f64) -> Result<(), StepFailure>;
+    /// Evaluates the node blocks at the solution in [`Self::z`] of the last
+    /// [`Self::solve`] and factors the step Jacobian there: the exact linearisation of the
+    /// step for its tangent (DESIGN §12).
+    fn linearize(&mut self) -> Result<(), StepFailure>;
+    /// With the blocks of quadrature node `i` from [`Self::linearize`]:
+    /// `dfq = A dx + B dv` and `dlv = C dx + E dv`, `dxv = (dx, dv)`.
+    fn apply_node(&self, i: usize, dxv: (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]);
+    /// Solves `J y = b` in place (the layout of [`Self::z`]) with the factors of
+    /// [`Self::linearize`].
+    fn solve_linearized(&mut self, b: &mut [f64]);
+    /// The tangent of `p = L_v(t, q, v)`: `dp = C dq + E dv` at `at = (t, q, v)`.
+    fn momentum_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        dqv: (&[f64], &[f64]),
+        dp: &mut [f64],
+    ) -> Result<(), Error>;
+    /// The tangent of the velocity solve: `E dv = dp − C dq` at `at = (t, q, v)`.
+    fn velocity_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        dqp: (&[f64], &[f64]),
+        dv: &mut [f64],
+    ) -> Result<(), Error>;
     /// Whether the node kernels of this backend need a deep stack (see
     /// [`crate::stepper`]'s stack guard).
     fn deep_stack(&self) -> bool;
@@ -220,6 +244,33 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn mass_at_end(&mut self, at: (f64, &[f64], &[f64]), sign: f64) -> Result<(), StepFailure> {
         forward!(self, b => b.mass_at_end(at, sign))
+    }
+    fn linearize(&mut self) -> Result<(), StepFailure> {
+        forward!(self, b => b.linearize())
+    }
+    #[inline(always)]
+    fn apply_node(&self, i: usize, d: (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
+        forward!(self, b => b.apply_node(i, d, dfq, dlv))
+    }
+    #[inline(always)]
+    fn solve_linearized(&mut self, x: &mut [f64]) {
+        forward!(self, b => b.solve_linearized(x))
+    }
+    fn momentum_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        d: (&[f64], &[f64]),
+        dp: &mut [f64],
+    ) -> Result<(), Error> {
+        forward!(self, b => b.momentum_tangent(at, d, dp))
+    }
+    fn velocity_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        d: (&[f64], &[f64]),
+        dv: &mut [f64],
+    ) -> Result<(), Error> {
+        forward!(self, b => b.velocity_tangent(at, d, dv))
     }
     #[inline(always)]
     fn deep_stack(&self) -> bool {

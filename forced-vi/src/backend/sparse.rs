@@ -155,6 +155,55 @@ impl StepBackend for SparseBackend<'_> {
         Ok(())
     }
 
+    fn linearize(&mut self) -> Result<(), StepFailure> {
+        let prob = &mut self.prob;
+        self.newton.factor_at(prob, &self.z).map_err(|f| {
+            if prob.outside {
+                StepFailure::OutsidePattern
+            } else {
+                StepFailure::Newton(f)
+            }
+        })
+    }
+
+    fn apply_node(&self, i: usize, (dx, dv): (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
+        let Some(blk) = self.prob.blocks.get(i) else {
+            dfq.fill(f64::NAN);
+            dlv.fill(f64::NAN);
+            return;
+        };
+        dfq.fill(0.0);
+        dlv.fill(0.0);
+        for (k, (r, c)) in self.prob.pattern.entries().enumerate() {
+            dfq[r] += blk.a[k] * dx[c] + blk.b[k] * dv[c];
+            dlv[r] += blk.c[k] * dx[c] + blk.e[k] * dv[c];
+        }
+    }
+
+    fn solve_linearized(&mut self, b: &mut [f64]) {
+        self.newton.solve_factored(b);
+    }
+
+    fn momentum_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        d: (&[f64], &[f64]),
+        dp: &mut [f64],
+    ) -> Result<(), Error> {
+        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        self.velocity.momentum_tangent(node, pattern, at, d, dp)
+    }
+
+    fn velocity_tangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        d: (&[f64], &[f64]),
+        dv: &mut [f64],
+    ) -> Result<(), Error> {
+        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        self.velocity.velocity_tangent(node, pattern, at, d, dv)
+    }
+
     #[inline(always)]
     fn deep_stack(&self) -> bool {
         false

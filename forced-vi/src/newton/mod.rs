@@ -121,6 +121,22 @@ impl Newton {
         self.iteration.have_factors = false;
     }
 
+    /// Evaluates and factors the Jacobian of `sys` at `z` (for the tangent of a solution,
+    /// DESIGN §12); a following [`Newton::solve`] makes its own factors.
+    pub(crate) fn factor_at<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        z: &DVector<f64>,
+    ) -> Result<(), NewtonFailure> {
+        self.iteration.have_factors = false;
+        LinearSolver::<S>::refresh(&mut self.linear, sys, z).map(|_| ())
+    }
+
+    /// Solves `J x = b` in place with the factors of [`Newton::factor_at`].
+    pub(crate) fn solve_factored(&self, b: &mut DVector<f64>) {
+        self.linear.lu.solve_in_place(b);
+    }
+
     /// Solves `R(z) = 0` from the initial guess in `z`, overwriting it.
     ///
     /// `residual_scale` sets the units of the residual test. Convergence needs both a small

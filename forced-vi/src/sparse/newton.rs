@@ -64,6 +64,21 @@ impl SparseNewton {
         self.iteration.last_iterations
     }
 
+    /// Evaluates and factors the Jacobian of `sys` at `z` (for tangents, DESIGN §12).
+    pub(crate) fn factor_at<S: SparseSystem>(
+        &mut self,
+        sys: &mut S,
+        z: &Vec<f64>,
+    ) -> Result<(), NewtonFailure> {
+        self.iteration.have_factors = false;
+        LinearSolver::<S>::refresh(&mut self.lu, sys, z).map(|_| ())
+    }
+
+    /// Solves `J x = b` in place with the factors of [`SparseNewton::factor_at`].
+    pub(crate) fn solve_factored(&mut self, b: &mut [f64]) {
+        self.lu.solve_in_place(b);
+    }
+
     /// Solves `R(z) = 0` from the guess in `z`; see [`crate::Newton::solve`] for the tests
     /// and the bound an `Ok` iterate meets.
     pub(crate) fn solve<S: SparseSystem>(

@@ -101,6 +101,65 @@ impl VelocitySolver {
         Ok(self.lu.max_abs())
     }
 
+    /// The node blocks at `(t, q, v)` into `self.blocks`, checked.
+    fn eval_blocks(
+        &mut self,
+        node: &dyn SparseNode,
+        pattern: &NodePattern,
+        (t, q, v): (f64, &[f64], &[f64]),
+    ) -> Result<(), Error> {
+        let mut sink = NodeSink::values(&mut self.lq_f, &mut self.lv, pattern, &mut self.blocks);
+        node.eval(t, q, v, &mut sink);
+        if sink.outside() {
+            return Err(Error::outside_pattern());
+        }
+        let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
+        if !(finite(&self.blocks.c) && finite(&self.blocks.e)) {
+            return Err(Error::NonFiniteModel { step: 0, t });
+        }
+        Ok(())
+    }
+
+    /// The tangent of `p = L_v(t, q, v)`: `dp = C dq + E dv` (DESIGN §12).
+    pub(crate) fn momentum_tangent(
+        &mut self,
+        node: &dyn SparseNode,
+        pattern: &NodePattern,
+        at: (f64, &[f64], &[f64]),
+        (dq, dv): (&[f64], &[f64]),
+        dp: &mut [f64],
+    ) -> Result<(), Error> {
+        self.eval_blocks(node, pattern, at)?;
+        dp.fill(0.0);
+        for (k, (r, c)) in pattern.entries().enumerate() {
+            dp[r] += self.blocks.c[k] * dq[c] + self.blocks.e[k] * dv[c];
+        }
+        Ok(())
+    }
+
+    /// The tangent of the velocity solve: `E dv = dp − C dq` (DESIGN §12).
+    pub(crate) fn velocity_tangent(
+        &mut self,
+        node: &dyn SparseNode,
+        pattern: &NodePattern,
+        at: (f64, &[f64], &[f64]),
+        (dq, dp): (&[f64], &[f64]),
+        dv: &mut [f64],
+    ) -> Result<(), Error> {
+        self.eval_blocks(node, pattern, at)?;
+        dv.copy_from_slice(dp);
+        for (k, (r, c)) in pattern.entries().enumerate() {
+            dv[r] -= self.blocks.c[k] * dq[c];
+        }
+        self.factor_mass(node, pattern, at, 0)?;
+        self.lu.solve_in_place(dv);
+        if dv.iter().all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFiniteModel { step: 0, t: at.0 })
+        }
+    }
+
     /// Checks (and factors) the mass matrix at `(t, q, v)` for the initial data.
     pub(crate) fn check_mass(
         &mut self,

@@ -42,8 +42,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             // Per unit step: the local errors of a run add up to about `tol`.
             let per_unit = span / h;
+            // The tangent (of a sensitivity run) goes through accepted steps only.
             let solved = self.attempt(h, &mut iters).and_then(|res| {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
+                if err <= 1.0 {
+                    self.tangent_step()?;
+                }
                 Ok((res, err))
             });
             match solved {

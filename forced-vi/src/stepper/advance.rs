@@ -138,9 +138,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         for level in 0..=levels {
             let parts = 1usize << level;
             let hs = h / parts as f64;
+            if level == 1 {
+                if let Some(tg) = self.tangent.as_mut() {
+                    tg.save();
+                }
+            }
             let mut outcome = Ok(0.0);
             for _ in 0..parts {
-                outcome = self.attempt(hs, &mut iters);
+                outcome = self
+                    .attempt(hs, &mut iters)
+                    .and_then(|res| self.tangent_step().map(|()| res));
                 if outcome.is_err() {
                     break;
                 }
@@ -158,6 +165,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 Err(f) => {
                     if levels > 0 {
                         self.state.copy_from(&self.saved);
+                    }
+                    if level > 0 {
+                        if let Some(tg) = self.tangent.as_mut() {
+                            tg.restore();
+                        }
                     }
                     if f == StepFailure::OutsidePattern {
                         return Err(Error::outside_pattern());

@@ -11,6 +11,7 @@
 //! | one step: Newton solve, update, the mass check; subdivision on failure | `advance` |
 //! | adaptive steps: the reference-scheme estimate, the controller, the first step (DESIGN §8) | `adaptive` |
 //! | compensated sums and the state saved for retries | `state` |
+//! | the tangent of the flow for sensitivities (DESIGN §12) | `tangent` |
 //! | the predictor from the previous step's polynomial | `predict` |
 //! | checks of a run, of initial data, of the time flag; step counts; non-finite values | `checks` |
 
@@ -20,6 +21,7 @@ mod checks;
 mod predict;
 mod start;
 mod state;
+mod tangent;
 
 use nalgebra::SVector;
 
@@ -165,6 +167,8 @@ pub struct Stepper<'a, M, const N: usize> {
     estimate: f64,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
+    /// Sensitivity runs: the tangent of the flow (DESIGN §12).
+    tangent: Option<Box<tangent::Tangent>>,
     /// The stack a step needs ([`step_stack_bytes`]).
     stack: usize,
     stats: RunStats,

@@ -98,6 +98,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             h_next: h.min(options.max_step),
             estimate: 0.0,
             lean: false,
+            tangent: None,
             stack,
             stats: RunStats::default(),
             started: false,

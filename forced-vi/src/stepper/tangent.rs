@@ -1,0 +1,187 @@
+//! The tangent of the flow (DESIGN §12), carried step by step beside the state.
+//!
+//! One step solves `R(Z; q_k, p_k) = 0` for the increments `Z`, and sets `q_{k+1} = q_k +
+//! Z_{s−1}`, `p_{k+1} = G_{s−1}`. With `J = ∂R/∂Z` factored at the solution, a direction
+//! `(dq_k, dp_k)` goes through the step as
+//!
+//! ```text
+//! J dZ = −(∂R/∂q_k dq_k + ∂R/∂p_k dp_k),   dq_{k+1} = dq_k + dZ_{s−1},   dp_{k+1} = dG_{s−1}
+//! ```
+//!
+//! where every `dG_j` is the linearised gradient of control point `j` (DESIGN §3) with the
+//! control points moved by `dx_0 = dq_k`, `dx_m = dq_k + dZ_m`: at quadrature node `i`,
+//! `dx_i = Σ_m Φ_im dx_m`, `dv_i = (1/h) Σ_m Ψ_im dx_m`, the node blocks give
+//! `d(L_q + F) = A dx_i + B dv_i`, `dL_v = C dx_i + E dv_i`, and the quadrature sums them
+//! into `dG_j = Σ_i b_i [h Φ_ij d(L_q + F)_i + Ψ_ij dL_v_i]`. The blocks are evaluated and
+//! `J` is factored at the accepted solution ([`StepBackend::linearize`]), so the tangent is
+//! that of the discrete map itself, with no finite differences; each column costs one
+//! solve with those factors and two products with the node blocks. Only accepted steps
+//! (and substeps) enter: the step sequence is held fixed.
+
+use nalgebra::DMatrix;
+
+use super::Stepper;
+use crate::backend::{StepBackend, StepFailure};
+use crate::error::Error;
+use crate::model::ForcedLagrangian;
+
+/// The tangent `∂(q_k, p_k)/∂(seed)` of a run and its scratch, made once per run.
+pub(crate) struct Tangent {
+    /// Columns of `2N` entries `(dq, dp)`, one after another.
+    pub(crate) m: Vec<f64>,
+    /// The columns before a subdivided step, restored if it fails.
+    saved: Vec<f64>,
+    /// Control-point directions and linearised gradients, `s` blocks of `N`.
+    dx: Vec<f64>,
+    g: Vec<f64>,
+    /// The right-hand side of a tangent solve, in the backend's layout.
+    rhs: Vec<f64>,
+    /// One node's `dx`, `dv`, `d(L_q + F)`, `dL_v`.
+    node: [Vec<f64>; 4],
+}
+
+impl Tangent {
+    /// The number of columns.
+    pub(crate) fn columns(&self, n: usize) -> usize {
+        self.m.len() / (2 * n)
+    }
+
+    /// Keeps the columns before a subdivided step.
+    pub(crate) fn save(&mut self) {
+        self.saved.clone_from(&self.m);
+    }
+
+    /// Goes back to the columns kept by [`Tangent::save`].
+    pub(crate) fn restore(&mut self) {
+        self.m.clone_from(&self.saved);
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// Starts carrying the tangent with respect to the initial data `(q_0, v_0)`: `2N`
+    /// columns, `dp_0 = C dq_0 + E dv_0` (DESIGN §12). Only before the first step.
+    pub(crate) fn track_tangent(&mut self) -> Result<(), Error> {
+        let s = self.scheme.stages();
+        let dim = self.backend.z().len();
+        let cols = 2 * N;
+        let mut m = vec![0.0; 2 * N * cols];
+        let (q0, v0) = (&self.state.q.sum[..], &self.state.v[..]);
+        let (mut dq, mut dv) = (vec![0.0; N], vec![0.0; N]);
+        for c in 0..cols {
+            dq.fill(0.0);
+            dv.fill(0.0);
+            if c < N {
+                dq[c] = 1.0;
+            } else {
+                dv[c - N] = 1.0;
+            }
+            let col = &mut m[c * 2 * N..(c + 1) * 2 * N];
+            col[..N].copy_from_slice(&dq);
+            self.backend
+                .momentum_tangent((0.0, q0, v0), (&dq, &dv), &mut col[N..])?;
+        }
+        self.tangent = Some(Box::new(Tangent {
+            saved: Vec::new(),
+            m,
+            dx: vec![0.0; s * N],
+            g: vec![0.0; s * N],
+            rhs: vec![0.0; dim],
+            node: [vec![0.0; N], vec![0.0; N], vec![0.0; N], vec![0.0; N]],
+        }));
+        Ok(())
+    }
+
+    /// Carries the tangent through the step just solved (size `state.h_prev`), whose
+    /// solution the backend still holds. Nothing changes on failure.
+    pub(super) fn tangent_step(&mut self) -> Result<(), StepFailure> {
+        let Some(tg) = self.tangent.as_mut() else {
+            return Ok(());
+        };
+        let backend = &mut self.backend;
+        backend.linearize()?;
+        let sch = self.scheme;
+        let (s, h) = (sch.stages(), self.state.h_prev);
+        let lay = backend.layout();
+        let cols = tg.columns(N);
+        for c in 0..cols {
+            let col = c * 2 * N;
+            for m in 0..s {
+                tg.dx[m * N..(m + 1) * N].copy_from_slice(&tg.m[col..col + N]);
+            }
+            linearized_gradients(backend, h, &tg.dx, &mut tg.g, &mut tg.node);
+            for j in 0..s - 1 {
+                for a in 0..N {
+                    let dp = if j == 0 { tg.m[col + N + a] } else { 0.0 };
+                    tg.rhs[lay.at(j + 1, a)] = -(tg.g[j * N + a] + dp);
+                }
+            }
+            backend.solve_linearized(&mut tg.rhs);
+            for m in 1..s {
+                for a in 0..N {
+                    tg.dx[m * N + a] = tg.m[col + a] + tg.rhs[lay.at(m, a)];
+                }
+            }
+            linearized_gradients(backend, h, &tg.dx, &mut tg.g, &mut tg.node);
+            for a in 0..N {
+                tg.m[col + a] = tg.dx[(s - 1) * N + a];
+                tg.m[col + N + a] = tg.g[(s - 1) * N + a];
+            }
+        }
+        Ok(())
+    }
+
+    /// The tangent at the current state in `(q, v)`, from `E dv = dp − C dq` at the current
+    /// `(t, q, v)` (after the final velocity solve): the columns of the initial data
+    /// (`2N × 2N`) and those of the parameters (`2N × P`).
+    pub(crate) fn tangent_in_velocities(&mut self) -> Result<(DMatrix<f64>, DMatrix<f64>), Error> {
+        let Some(tg) = self.tangent.as_ref() else {
+            return Ok((DMatrix::zeros(2 * N, 0), DMatrix::zeros(2 * N, 0)));
+        };
+        let cols = tg.columns(N);
+        let mut out = DMatrix::from_column_slice(2 * N, cols, &tg.m);
+        let st = &self.state;
+        let at = (self.t, &st.q.sum[..], &st.v[..]);
+        let mut dv = vec![0.0; N];
+        for mut col in out.column_iter_mut() {
+            let (dq, dp) = col.as_mut_slice().split_at_mut(N);
+            self.backend.velocity_tangent(at, (dq, dp), &mut dv)?;
+            dp.copy_from_slice(&dv);
+        }
+        let wrt_parameters = out.columns(2 * N, cols - 2 * N).into_owned();
+        let wrt_initial = out.columns(0, 2 * N).into_owned();
+        Ok((wrt_initial, wrt_parameters))
+    }
+}
+
+/// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx` (`s` blocks of `N`, block 0
+/// the start), with the node blocks of the last [`StepBackend::linearize`].
+fn linearized_gradients<B: StepBackend>(
+    backend: &B,
+    h: f64,
+    dx: &[f64],
+    g: &mut [f64],
+    [dxi, dvi, dfq, dlv]: &mut [Vec<f64>; 4],
+) {
+    let sch = backend.scheme();
+    let (s, n) = (sch.stages(), dxi.len());
+    g.fill(0.0);
+    for i in 0..sch.quadrature_nodes() {
+        dxi.fill(0.0);
+        dvi.fill(0.0);
+        for m in 0..s {
+            let (phi, psi) = (sch.phi(i, m), sch.psi(i, m) / h);
+            for a in 0..n {
+                dxi[a] += phi * dx[m * n + a];
+                dvi[a] += psi * dx[m * n + a];
+            }
+        }
+        backend.apply_node(i, (dxi, dvi), dfq, dlv);
+        let bi = sch.b()[i];
+        for j in 0..s {
+            let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+            for a in 0..n {
+                g[j * n + a] += cf * dfq[a] + cl * dlv[a];
+            }
+        }
+    }
+}

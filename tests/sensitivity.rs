@@ -1,0 +1,310 @@
+//! Sensitivities of the discrete flow (DESIGN §12, issue 24): the tangent carried through
+//! the factored step Jacobian against central differences of the runs themselves, the
+//! symplecticity of the unforced map in `(q, p)`, the two backends against each other, and
+//! adaptive runs against fixed ones.
+//! `cargo test --workspace --release --test sensitivity`.
+
+use forced_vi::{
+    ForcedLagrangian, InitialState, Integrator, LinearPath, NewtonOptions, Scalar, Scheme,
+    Sensitivities,
+};
+use forced_vi_models::large::FpuChain;
+use forced_vi_models::models::{
+    CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing, KapitzaPendulum,
+    KeplerDrag,
+};
+use nalgebra::{DMatrix, SVector};
+
+/// `∂(q_T, v_T)/∂(q_0, v_0)` by central differences of fixed-step final states, step `delta`
+/// relative to each entry's size.
+fn central_differences<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+    (q0, v0): ([f64; N], [f64; N]),
+    t_final: f64,
+    delta: f64,
+) -> DMatrix<f64> {
+    let mut out = DMatrix::zeros(2 * N, 2 * N);
+    for c in 0..2 * N {
+        let run = |sign: f64| {
+            let (mut q, mut v) = (q0, v0);
+            let x = if c < N { &mut q[c] } else { &mut v[c - N] };
+            let d = delta * x.abs().max(1.0);
+            *x += sign * d;
+            let end = integ
+                .final_state(InitialState::from_velocity(q, v), t_final)
+                .expect("a perturbed run");
+            (end.q, end.v, d)
+        };
+        let ((qp, vp, d), (qm, vm, _)) = (run(1.0), run(-1.0));
+        for a in 0..N {
+            out[(a, c)] = (qp[a] - qm[a]) / (2.0 * d);
+            out[(N + a, c)] = (vp[a] - vm[a]) / (2.0 * d);
+        }
+    }
+    out
+}
+
+/// `max |A − B| / max |B|`.
+fn relative(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    (a - b).amax() / b.amax()
+}
+
+fn check_against_differences<M: ForcedLagrangian<N>, const N: usize>(
+    name: &str,
+    model: &M,
+    scheme: Scheme,
+    h: f64,
+    (q0, v0): ([f64; N], [f64; N]),
+    t_final: f64,
+) -> f64 {
+    let integ = Integrator::new(model, scheme, h).expect("integrator");
+    let s: Sensitivities<N> = integ
+        .sensitivities(InitialState::from_velocity(q0, v0), t_final)
+        .expect("sensitivity run");
+    let end = integ
+        .final_state(InitialState::from_velocity(q0, v0), t_final)
+        .expect("run");
+    assert_eq!(s.q, end.q, "{name}: the same final state");
+    assert_eq!(s.stats.steps, end.stats.steps);
+    assert_eq!(s.wrt_initial.shape(), (2 * N, 2 * N));
+    let fd = central_differences(&integ, (q0, v0), t_final, 1e-5);
+    let rel = relative(&s.wrt_initial, &fd);
+    eprintln!(
+        "{name}: |S − FD| / |FD| = {rel:.2e}, |S| = {:.2e}",
+        fd.amax()
+    );
+    assert!(rel < 1e-6, "{name}: {rel:.2e}");
+    rel
+}
+
+#[test]
+fn sensitivity_matches_central_differences_on_the_report_models() {
+    let l3 = || Scheme::lobatto(3).expect("scheme");
+    check_against_differences(
+        "coupled_van_der_pol",
+        &CoupledVanDerPol::PAPER,
+        l3(),
+        0.01,
+        ([-0.5, -0.25], [0.0, 4.0]),
+        1.0,
+    );
+    check_against_differences(
+        "damped_oscillator",
+        &DampedOscillator::DEFAULT,
+        l3(),
+        0.05,
+        ([1.0, -0.5], [0.0, 0.3]),
+        10.0,
+    );
+    check_against_differences(
+        "double_pendulum_friction",
+        &DoublePendulumFriction::DEFAULT,
+        l3(),
+        0.01,
+        ([1.0, 0.5], [0.0, 0.0]),
+        5.0,
+    );
+    check_against_differences(
+        "kepler_drag",
+        &KeplerDrag::DEFAULT,
+        Scheme::lobatto(4).expect("scheme"),
+        0.05,
+        ([1.0, 0.0], [0.0, 1.1]),
+        20.0,
+    );
+    check_against_differences(
+        "driven_duffing",
+        &DrivenDuffing::CHAOTIC,
+        l3(),
+        0.02,
+        ([1.0], [0.0]),
+        10.0,
+    );
+    check_against_differences(
+        "kapitza_pendulum",
+        &KapitzaPendulum::UPRIGHT,
+        l3(),
+        1e-3,
+        ([3.0], [0.0]),
+        2.0,
+    );
+}
+
+#[test]
+fn sensitivity_every_scheme_matches_central_differences() {
+    for scheme in [
+        Scheme::midpoint(),
+        Scheme::lobatto(2).expect("scheme"),
+        Scheme::lobatto(4).expect("scheme"),
+        Scheme::lobatto(5).expect("scheme"),
+        Scheme::new(forced_vi::SchemeId::Alpha(0.3)).expect("scheme"),
+    ] {
+        let name = format!("coupled_van_der_pol {}", scheme.id());
+        check_against_differences(
+            &name,
+            &CoupledVanDerPol::PAPER,
+            scheme,
+            0.02,
+            ([-0.5, -0.25], [0.0, 4.0]),
+            1.0,
+        );
+    }
+}
+
+/// A double pendulum without friction: `F = 0`, a configuration-dependent mass matrix.
+struct DoublePendulum;
+
+impl ForcedLagrangian<2> for DoublePendulum {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        let (a, b) = (q[0], q[1]);
+        let (va, vb) = (v[0], v[1]);
+        va * va + vb * vb * 0.5 + va * vb * (a - b).cos() + a.cos() * 2.0 * 9.81 + b.cos() * 9.81
+    }
+}
+
+/// The `(q, p)` tangent from the `(q, v)` one: `dp = C dq + E dv` at both ends.
+fn qp_tangent<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    s: &Sensitivities<N>,
+    (q0, v0): ([f64; N], [f64; N]),
+) -> DMatrix<f64> {
+    let to_p = |q: &SVector<f64, N>, v: &SVector<f64, N>| {
+        let j = model.node_jacobian(q, v);
+        let mut m = DMatrix::<f64>::identity(2 * N, 2 * N);
+        for r in 0..N {
+            for c in 0..N {
+                m[(N + r, c)] = j.c[(r, c)];
+                m[(N + r, N + c)] = j.e[(r, c)];
+            }
+        }
+        m
+    };
+    let start = to_p(&SVector::from(q0), &SVector::from(v0));
+    let end = to_p(&s.q, &s.v);
+    end * &s.wrt_initial * start.try_inverse().expect("regular mass")
+}
+
+#[test]
+fn sensitivity_unforced_map_is_symplectic() {
+    let init = ([1.0, 0.5], [0.0, 0.0]);
+    for scheme in [
+        Scheme::midpoint(),
+        Scheme::lobatto(3).expect("scheme"),
+        Scheme::lobatto(5).expect("scheme"),
+    ] {
+        let mut j = DMatrix::<f64>::zeros(4, 4);
+        for a in 0..2 {
+            j[(a, 2 + a)] = 1.0;
+            j[(2 + a, a)] = -1.0;
+        }
+        // Over 100 steps within 1e-12; over 500, where |M| grows to about 5, within
+        // 1e-12 |M|² (the round-off of the products, which grows with the steps).
+        for (t_final, bound) in [(1.0, 1.0), (5.0, f64::NAN)] {
+            let s = Integrator::new(&DoublePendulum, scheme.clone(), 0.01)
+                .expect("integrator")
+                .sensitivities(InitialState::from_velocity(init.0, init.1), t_final)
+                .expect("run");
+            let m = qp_tangent(&DoublePendulum, &s, init);
+            let defect = (m.transpose() * &j * &m - &j).amax();
+            let bound = 1e-12
+                * if bound.is_nan() {
+                    m.amax().powi(2)
+                } else {
+                    bound
+                };
+            eprintln!(
+                "{} T = {t_final}: |MᵀJM − J| = {defect:.2e} (|M| = {:.1e})",
+                scheme.id(),
+                m.amax()
+            );
+            assert!(defect < bound, "{defect:.2e}");
+        }
+    }
+    // With friction the map contracts volume: det M < 1 (a check that the test can fail).
+    let friction = DoublePendulumFriction::DEFAULT;
+    let s = Integrator::new(&friction, Scheme::lobatto(3).expect("scheme"), 0.01)
+        .expect("integrator")
+        .sensitivities(InitialState::from_velocity(init.0, init.1), 5.0)
+        .expect("run");
+    let det = qp_tangent(&friction, &s, init).determinant();
+    assert!(det < 0.9, "det = {det}");
+}
+
+#[test]
+fn sensitivity_sparse_backend_matches_dense() {
+    const N: usize = 12;
+    let model = FpuChain::<N>::default();
+    let init = FpuChain::<N>::initial();
+    for scheme in [Scheme::lobatto(3), Scheme::lobatto(4)] {
+        let scheme = scheme.expect("scheme");
+        let run = |path| {
+            Integrator::new(&model, scheme.clone(), 0.05)
+                .expect("integrator")
+                .linear_path(path)
+                .sensitivities(init, 3.0)
+                .expect("run")
+        };
+        let (dense, sparse) = (run(LinearPath::Dense), run(LinearPath::Sparse));
+        let rel = relative(&sparse.wrt_initial, &dense.wrt_initial);
+        eprintln!("fpu_chain {N} {}: sparse vs dense {rel:.2e}", scheme.id());
+        assert!(rel < 1e-10, "{rel:.2e}");
+    }
+    // And against differences on the sparse backend itself.
+    let integ = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 0.05)
+        .expect("integrator")
+        .linear_path(LinearPath::Sparse);
+    let s = integ.sensitivities(init, 3.0).expect("run");
+    let (q0, v0) = match init {
+        InitialState::Velocity { q, v } => (q, v),
+        InitialState::Momentum { .. } => unreachable!(),
+    };
+    let fd = central_differences(&integ, (q0, v0), 3.0, 1e-5);
+    let rel = relative(&s.wrt_initial, &fd);
+    assert!(rel < 1e-6, "{rel:.2e}");
+}
+
+#[test]
+fn sensitivity_adaptive_runs_hold_their_steps() {
+    // Adaptive at a tight tolerance and fixed at a small step approximate the same flow
+    // derivative.
+    let model = CoupledVanDerPol::PAPER;
+    let init = InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]);
+    let scheme = Scheme::lobatto(4).expect("scheme");
+    let adaptive = Integrator::adaptive(&model, scheme.clone(), 1e-11, 1e-11)
+        .expect("integrator")
+        .sensitivities(init, 1.0)
+        .expect("adaptive run");
+    let fixed = Integrator::new(&model, scheme, 1e-3)
+        .expect("integrator")
+        .sensitivities(init, 1.0)
+        .expect("fixed run");
+    let rel = relative(&adaptive.wrt_initial, &fixed.wrt_initial);
+    eprintln!(
+        "adaptive ({} steps) vs fixed: {rel:.2e}",
+        adaptive.stats.steps
+    );
+    assert!(adaptive.stats.steps < fixed.stats.steps / 4);
+    assert!(rel < 1e-8, "{rel:.2e}");
+}
+
+#[test]
+fn sensitivity_subdivided_steps_are_carried() {
+    // A step too large for Newton is subdivided; the tangent goes through the substeps.
+    let model = KeplerDrag::DEFAULT;
+    let (q0, v0) = ([1.0, 0.0], [0.0, 1.1]);
+    let integ = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1.0)
+        .expect("integrator")
+        .newton(NewtonOptions::default().max_iterations(3))
+        .max_subdivisions(6);
+    let s = integ
+        .sensitivities(InitialState::from_velocity(q0, v0), 8.0)
+        .expect("run");
+    let fd = central_differences(&integ, (q0, v0), 8.0, 1e-5);
+    let rel = relative(&s.wrt_initial, &fd);
+    eprintln!(
+        "subdivided: {} of {} steps, {rel:.2e}",
+        s.stats.subdivided_steps, s.stats.steps
+    );
+    assert!(s.stats.subdivided_steps > 0);
+    assert!(rel < 1e-6, "{rel:.2e}");
+}
