@@ -26,6 +26,22 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     let s = M::STRUCTURE;
     let (qs, vs) = (SVector::from(q), SVector::from(v));
     let (qs2, vs2) = (SVector::from(q2), SVector::from(v2));
+    // The code with the parameters as duals (for sensitivities) is the model's own at
+    // theta = its fields.
+    let theta = m.parameter_values();
+    let lw = m.lagrangian_with::<f64>(0.0, &q, &v, &theta);
+    assert!(
+        close(lw, m.lagrangian::<f64>(&q, &v)),
+        "{name}: lagrangian_with"
+    );
+    let (fw, f) = (
+        m.force_with::<f64>(0.0, &q, &v, &theta),
+        m.force::<f64>(&q, &v),
+    );
+    assert!(
+        fw.iter().zip(&f).all(|(a, b)| close(*a, *b)),
+        "{name}: force_with"
+    );
     let k = m.node_jacobian(&qs, &vs);
     let g = general::node_jacobian(m, &qs, &vs);
     let blocks = |j: &forced_vi::NodeJacobian<N>| -> Vec<f64> {

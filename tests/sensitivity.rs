@@ -308,3 +308,164 @@ fn sensitivity_subdivided_steps_are_carried() {
     assert!(s.stats.subdivided_steps > 0);
     assert!(rel < 1e-6, "{rel:.2e}");
 }
+
+/// `∂(q_T, v_T)/∂θ` by central differences over models rebuilt from perturbed parameters.
+fn parameter_differences<M: ForcedLagrangian<N>, const N: usize>(
+    make: impl Fn(&[f64]) -> M,
+    theta: &[f64],
+    (scheme, h): (Scheme, f64),
+    init: InitialState<N>,
+    t_final: f64,
+) -> DMatrix<f64> {
+    let mut out = DMatrix::zeros(2 * N, theta.len());
+    for k in 0..theta.len() {
+        let d = 1e-5 * theta[k].abs().max(1.0);
+        let run = |sign: f64| {
+            let mut th = theta.to_vec();
+            th[k] += sign * d;
+            let model = make(&th);
+            Integrator::new(&model, scheme.clone(), h)
+                .expect("integrator")
+                .final_state(init, t_final)
+                .expect("a perturbed run")
+        };
+        let (p, m) = (run(1.0), run(-1.0));
+        for a in 0..N {
+            out[(a, k)] = (p.q[a] - m.q[a]) / (2.0 * d);
+            out[(N + a, k)] = (p.v[a] - m.v[a]) / (2.0 * d);
+        }
+    }
+    out
+}
+
+fn check_parameters<M: ForcedLagrangian<N>, const N: usize>(
+    name: &str,
+    make: impl Fn(&[f64]) -> M,
+    names: &[&str],
+    (scheme, h): (Scheme, f64),
+    init: InitialState<N>,
+    t_final: f64,
+) {
+    let model = make(&[]);
+    let theta = model.parameter_values();
+    assert_eq!(
+        model.parameter_names(),
+        names,
+        "{name}: the fields, in order"
+    );
+    let model = make(&theta);
+    let s = Integrator::new(&model, scheme.clone(), h)
+        .expect("integrator")
+        .sensitivities(init, t_final)
+        .expect("run");
+    assert_eq!(s.wrt_parameters.shape(), (2 * N, names.len()));
+    let fd = parameter_differences(&make, &theta, (scheme, h), init, t_final);
+    let rel = relative(&s.wrt_parameters, &fd);
+    eprintln!(
+        "{name} parameters: |S − FD| / |FD| = {rel:.2e}, |S| = {:.2e}",
+        fd.amax()
+    );
+    assert!(rel < 1e-6, "{name}: {rel:.2e}");
+}
+
+#[test]
+fn sensitivity_parameters_match_central_differences() {
+    let l3 = || (Scheme::lobatto(3).expect("scheme"), 0.01);
+    // `make(&[])` gives the default model; `make(θ)` the model with parameters θ.
+    let pick = |th: &[f64], d: &[f64]| -> Vec<f64> {
+        if th.is_empty() {
+            d.to_vec()
+        } else {
+            th.to_vec()
+        }
+    };
+    check_parameters(
+        "coupled_van_der_pol",
+        |th: &[f64]| {
+            let p = pick(th, &[0.5, 0.02, 0.8]);
+            CoupledVanDerPol {
+                eps: p[0],
+                rho: p[1],
+                lambda: p[2],
+            }
+        },
+        &["eps", "rho", "lambda"],
+        l3(),
+        InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+        1.0,
+    );
+    check_parameters(
+        "double_pendulum_friction",
+        |th: &[f64]| {
+            let d = DoublePendulumFriction::DEFAULT;
+            let p = pick(th, &[d.m1, d.m2, d.l1, d.l2, d.g, d.c]);
+            DoublePendulumFriction {
+                m1: p[0],
+                m2: p[1],
+                l1: p[2],
+                l2: p[3],
+                g: p[4],
+                c: p[5],
+            }
+        },
+        &["m1", "m2", "l1", "l2", "g", "c"],
+        l3(),
+        InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]),
+        3.0,
+    );
+    check_parameters(
+        "kepler_drag",
+        |th: &[f64]| {
+            let p = pick(th, &[1.0, 0.01]);
+            KeplerDrag {
+                mu: p[0],
+                gamma: p[1],
+            }
+        },
+        &["mu", "gamma"],
+        (Scheme::lobatto(4).expect("scheme"), 0.05),
+        InitialState::from_velocity([1.0, 0.0], [0.0, 1.1]),
+        10.0,
+    );
+    // Mass parameters: p_0 = L_v(q_0, v_0) moves with them.
+    check_parameters(
+        "damped_oscillator",
+        |th: &[f64]| {
+            let d = DampedOscillator::DEFAULT;
+            let base = d.parameter_values();
+            let p = pick(th, &base);
+            let mut m = d;
+            m.m11 = p[0];
+            m.m12 = p[1];
+            m.m22 = p[2];
+            m.k11 = p[3];
+            m.k12 = p[4];
+            m.k22 = p[5];
+            m.d11 = p[6];
+            m.d12 = p[7];
+            m.d21 = p[8];
+            m.d22 = p[9];
+            m
+        },
+        &[
+            "m11", "m12", "m22", "k11", "k12", "k22", "d11", "d12", "d21", "d22",
+        ],
+        (Scheme::lobatto(3).expect("scheme"), 0.05),
+        InitialState::from_velocity([1.0, -0.5], [0.0, 0.3]),
+        5.0,
+    );
+}
+
+#[test]
+fn sensitivity_hand_written_models_declare_no_parameters() {
+    let s = Integrator::new(
+        &DrivenDuffing::CHAOTIC,
+        Scheme::lobatto(3).expect("scheme"),
+        0.02,
+    )
+    .expect("integrator")
+    .sensitivities(InitialState::from_velocity([1.0], [0.0]), 1.0)
+    .expect("run");
+    assert_eq!(s.wrt_parameters.shape(), (2, 0));
+    assert!(DrivenDuffing::CHAOTIC.parameter_names().is_empty());
+}

@@ -49,7 +49,15 @@ fn entry(
     };
     let checked = check::check(&cx, &model);
     match (cx.check(), checked) {
-        (Ok(()), Some(checked)) => expand::generate(&checked),
+        (Ok(()), Some(checked)) => {
+            // The same model with its parameters as duals, for their derivatives; a model
+            // that does not read that way declares no parameters.
+            let quiet = ctxt::Ctxt::default();
+            let theta = check::check_as(&quiet, &model, true);
+            let read = quiet.check().is_ok();
+            let theta = theta.filter(|_| read);
+            expand::generate(&checked, theta.as_ref())
+        }
         (Err(e), _) => fallback::expand(&model, e),
         (Ok(()), None) => fallback::expand(
             &model,

@@ -98,6 +98,11 @@ pub struct Row {
 
 /// Runs every rule; returns the analysis if no rule failed.
 pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
+    check_as(cx, model, false)
+}
+
+/// [`check`], with the parameters as `__D` values if `params_dual` (no split then).
+pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Checked<'a>> {
     check_fields(cx, model);
     let const_params = check_generics(cx, model);
     let groups = check_coordinates(cx, model, &const_params);
@@ -107,6 +112,7 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         params: model.params.iter().map(|p| p.ident.clone()).collect(),
         const_params,
         model: model.item.ident.clone(),
+        params_dual,
     };
     let (_, lagrangian) = model.lagrangian.as_ref()?;
     let mut lower_l = Lowerer::new(cx, &env, "the Lagrangian");
@@ -151,7 +157,9 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
         checked_index,
         split: None,
     };
-    checked.split = crate::split::split(&checked);
+    if !params_dual {
+        checked.split = crate::split::split(&checked);
+    }
     check_dense_size(cx, &checked);
     Some(checked)
 }

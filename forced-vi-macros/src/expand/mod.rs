@@ -62,10 +62,19 @@ pub fn bindings(
             });
         }
     }
-    for p in &env.params {
-        if names.contains(&p.to_string()) {
-            out.extend(quote!(let #p: f64 = self.#p;));
+    for (k, p) in env.params.iter().enumerate() {
+        if !names.contains(&p.to_string()) {
+            continue;
         }
+        out.extend(if env.params_dual {
+            let k = lit(k);
+            quote!(let #p: #scalar = match __fvi_theta.get(#k) {
+                ::core::option::Option::Some(__fvi_x) => *__fvi_x,
+                ::core::option::Option::None => #scalar::from(self.#p),
+            };)
+        } else {
+            quote!(let #p: f64 = self.#p;)
+        });
     }
     out
 }
@@ -76,8 +85,9 @@ fn param_bindings(env: &Env) -> TokenStream {
     quote!(#( #[allow(unused_variables)] let #ps: f64 = self.#ps; )*)
 }
 
-/// The generated code for a checked model.
-pub fn generate(c: &Checked) -> TokenStream {
+/// The generated code for a checked model; `theta`, the same model checked with its
+/// parameters as duals, adds `lagrangian_with` and `force_with` (DESIGN §12).
+pub fn generate(c: &Checked, theta: Option<&Checked>) -> TokenStream {
     let g = Gen::new(c);
     let timed = c.uses_time;
     // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
@@ -112,9 +122,14 @@ pub fn generate(c: &Checked) -> TokenStream {
         }
         None => (TokenStream::new(), TokenStream::new()),
     };
+    let parameter_items = match theta {
+        Some(th) => Gen::new(th).parameter_items(&mut helpers),
+        None => TokenStream::new(),
+    };
     let items = quote! {
         #lagrangian
         #force_method
+        #parameter_items
     };
     let trait_impl = g.trait_impl(items, check_model, kernels_and_stack, split_items);
     let inherent_impl = g.inherent_impl(helpers);
@@ -293,6 +308,85 @@ impl<'c, 'm> Gen<'c, 'm> {
                     #body
                 }
             }
+        }
+    }
+
+    /// The parameters for sensitivities (DESIGN §12), from a model checked with them as
+    /// duals: their names and values, and `L` and `F` at given parameter values
+    /// `__fvi_theta` (with a helper per force entry added to `helpers`).
+    fn parameter_items(&self, helpers: &mut TokenStream) -> TokenStream {
+        let c = self.c;
+        let (n, d, scalar_bound) = (&c.n, &self.d, &self.scalar_bound);
+        let (dq, dv, dt) = (&self.dq, &self.dv, &self.dt);
+        let ps = &c.env.params;
+        let names = ps.iter().map(|p| p.to_string());
+        let time = |names: &BTreeSet<String>| {
+            let t = Ident::new(TIME, Span::call_site());
+            if names.contains(TIME) {
+                quote!(let #t: #d = #dt;)
+            } else {
+                quote!(let _ = #dt;)
+            }
+        };
+        let l_bind = self.bindings(&c.lagrangian.names);
+        let l_time = time(&c.lagrangian.names);
+        let l_body = lowered_dual(&c.lagrangian);
+        let force = c.force.as_ref().map(|force| {
+            for (k, f) in force.fns.iter().enumerate() {
+                let name = format_ident!("__fvi_pf{}", k);
+                let bind = self.bindings(&f.lowered.names);
+                let t_bind = time(&f.lowered.names);
+                let body = lowered_dual(&f.lowered);
+                let index = f.index.as_ref().map(|i| quote!(, #i: usize));
+                helpers.extend(quote! {
+                    #[doc(hidden)]
+                    #[inline(always)]
+                    #[allow(unused_braces, unused_parens, unused_variables)]
+                    fn #name<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n], __fvi_theta: &[#d] #index) -> #d {
+                        #t_bind
+                        #bind
+                        #body
+                    }
+                });
+            }
+            let body = match &c.n {
+                Len::Lit(_) => {
+                    let calls = force.rows.iter().map(|r| {
+                        let name = format_ident!("__fvi_pf{}", r.func);
+                        let index = r.index.map(|i| {
+                            let i = lit(i);
+                            quote!(, #i)
+                        });
+                        quote!(self.#name(#dt, #dq, #dv, __fvi_theta #index))
+                    });
+                    quote!([#(#calls),*])
+                }
+                Len::Param(_) => quote!(::core::array::from_fn(|__fvi_k| {
+                    self.__fvi_pf0(#dt, #dq, #dv, __fvi_theta, __fvi_k)
+                })),
+            };
+            quote! {
+                #[inline]
+                fn force_with<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n], __fvi_theta: &[#d]) -> [#d; #n] {
+                    #body
+                }
+            }
+        });
+        quote! {
+            fn parameter_names(&self) -> &'static [&'static str] {
+                &[#(#names),*]
+            }
+            fn parameter_values(&self) -> ::std::vec::Vec<f64> {
+                ::std::vec![#(self.#ps),*]
+            }
+            #[inline]
+            #[allow(unused_braces, unused_parens, unused_variables)]
+            fn lagrangian_with<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], #dv: &[#d; #n], __fvi_theta: &[#d]) -> #d {
+                #l_time
+                #l_bind
+                #l_body
+            }
+            #force
         }
     }
 

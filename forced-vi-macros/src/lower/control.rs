@@ -117,7 +117,10 @@ impl Lowerer<'_> {
                 range: le.range,
             },
         );
-        let ty = ty.map(|t| quote!(: #t));
+        // With the parameters as duals, a value the user typed `f64` may be one.
+        let ty = ty
+            .filter(|_| !(self.env.params_dual && le.kind == Kind::Dual))
+            .map(|t| quote!(: #t));
         let let_token = &local.let_token;
         quote!(#let_token #mutability #ident #ty = #value;)
     }

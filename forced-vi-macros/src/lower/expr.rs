@@ -131,7 +131,12 @@ impl Lowerer<'_> {
             }
         }
         if self.env.params.iter().any(|p| *p == name) {
-            let mut l = Lowered::new(tokens, Kind::Real);
+            let kind = if self.env.params_dual {
+                Kind::Dual
+            } else {
+                Kind::Real
+            };
+            let mut l = Lowered::new(tokens, kind);
             l.names.insert(name);
             return l;
         }

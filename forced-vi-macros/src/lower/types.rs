@@ -94,6 +94,9 @@ pub struct Env {
     pub const_params: Vec<Ident>,
     /// The struct's name, for messages.
     pub model: Ident,
+    /// The parameters are `__D` values rather than `f64` (the code of `lagrangian_with` and
+    /// `force_with`, which differentiate in them).
+    pub params_dual: bool,
 }
 
 /// Which coordinates of a group a use touches.

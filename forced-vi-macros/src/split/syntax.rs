@@ -257,6 +257,7 @@ impl Rewrite<'_> {
             params: self.env.params.clone(),
             const_params: self.env.const_params.clone(),
             model: self.env.model.clone(),
+            params_dual: self.env.params_dual,
         }
     }
 }

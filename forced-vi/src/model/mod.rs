@@ -136,6 +136,33 @@ pub trait ForcedLagrangian<const N: usize> {
         self.force(q, v)
     }
 
+    /// The names of the parameters `θ` that [`crate::Integrator::sensitivities`]
+    /// differentiates, in order: the struct's fields for a `#[forced_lagrangian]` model.
+    /// The default is none (no parameter columns); a hand-written model declares its
+    /// parameters by overriding this, [`Self::parameter_values`],
+    /// [`Self::lagrangian_with`] and [`Self::force_with`].
+    fn parameter_names(&self) -> &'static [&'static str] {
+        &[]
+    }
+
+    /// The values of the parameters, in the order of [`Self::parameter_names`].
+    fn parameter_values(&self) -> Vec<f64> {
+        Vec::new()
+    }
+
+    /// `L(t, q, v)` with the parameters set to `theta` (dual numbers, so that the runtime
+    /// can differentiate in them). The default ignores `theta`.
+    fn lagrangian_with<D: Scalar>(&self, t: D, q: &[D; N], v: &[D; N], theta: &[D]) -> D {
+        let _ = theta;
+        self.lagrangian_at(t, q, v)
+    }
+
+    /// `F(t, q, v)` with the parameters set to `theta`; the default ignores `theta`.
+    fn force_with<D: Scalar>(&self, t: D, q: &[D; N], v: &[D; N], theta: &[D]) -> [D; N] {
+        let _ = theta;
+        self.force_at(t, q, v)
+    }
+
     /// Stack bytes that one call of a node kernel may need. The integrator runs the
     /// kernels on a stack at least this deep (growing it on the heap when the caller's is
     /// too shallow), so a large model cannot overflow a 2 MiB thread stack. The default
@@ -310,6 +337,70 @@ pub mod general {
             SVector::zeros()
         };
         NodeGradient { fq: lq + f, lv }
+    }
+
+    /// A bound on the stack that [`node_parameter_gradient_at`] needs.
+    pub const fn parameter_stack_bytes<const N: usize>() -> usize {
+        let dual = std::mem::size_of::<HyperDualSVec64<N, 1>>();
+        N.saturating_mul(dual)
+            .saturating_mul(8)
+            .saturating_add(64 * 1024)
+    }
+
+    /// `∂(L_q + F)/∂θ_k` and `∂L_v/∂θ_k` at `(t, q, v)`, for the parameters `theta` (the
+    /// values of [`ForcedLagrangian::parameter_values`]), from
+    /// [`ForcedLagrangian::lagrangian_with`] and [`ForcedLagrangian::force_with`] with
+    /// hyper-dual numbers over `(q, θ_k)` and `(v, θ_k)`.
+    pub fn node_parameter_gradient_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        (t, q, v): (f64, &SVector<f64, N>, &SVector<f64, N>),
+        theta: &[f64],
+        k: usize,
+    ) -> NodeGradient<N> {
+        let (qa, va) = (arr(q), arr(v));
+        let th = SVector::<f64, 1>::from([theta.get(k).copied().unwrap_or(f64::NAN)]);
+        fn with<D: Scalar>(theta: &[f64], k: usize, x: D) -> Vec<D> {
+            (theta.iter().enumerate())
+                .map(|(j, &y)| if j == k { x } else { D::from(y) })
+                .collect()
+        }
+        let (_, _, _, lq_th) = partial_hessian(
+            |(x, p): (
+                SVector<HyperDualSVec64<N, 1>, N>,
+                SVector<HyperDualSVec64<N, 1>, 1>,
+            )| {
+                m.lagrangian_with(t.into(), &arr(&x), &lift(&va), &with(theta, k, p[0]))
+            },
+            (q, &th),
+        );
+        let (_, _, _, lv_th) = partial_hessian(
+            |(x, p): (
+                SVector<HyperDualSVec64<N, 1>, N>,
+                SVector<HyperDualSVec64<N, 1>, 1>,
+            )| {
+                m.lagrangian_with(t.into(), &lift(&qa), &arr(&x), &with(theta, k, p[0]))
+            },
+            (v, &th),
+        );
+        let mut fq = lq_th.column(0).into_owned();
+        if M::STRUCTURE.has_force {
+            let (_, f_th) = jacobian(
+                |p: SVector<DualSVec64<1>, 1>| {
+                    SVector::from(m.force_with(
+                        t.into(),
+                        &lift(&qa),
+                        &lift(&va),
+                        &with(theta, k, p[0]),
+                    ))
+                },
+                &th,
+            );
+            fq += f_th.column(0);
+        }
+        NodeGradient {
+            fq,
+            lv: lv_th.column(0).into_owned(),
+        }
     }
 
     /// The gradient and the blocks `A, B, C, E` at `(q, v)`.

@@ -18,12 +18,13 @@
 //! solve with those factors and two products with the node blocks. Only accepted steps
 //! (and substeps) enter: the step sequence is held fixed.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, SVector};
 
-use super::Stepper;
+use super::{with_stack, Stepper};
 use crate::backend::{StepBackend, StepFailure};
-use crate::error::Error;
-use crate::model::ForcedLagrangian;
+use crate::error::{Error, NewtonFailure};
+use crate::model::{general, ForcedLagrangian, NodeGradient};
+use crate::scalar::all_finite;
 
 /// The tangent `∂(q_k, p_k)/∂(seed)` of a run and its scratch, made once per run.
 pub(crate) struct Tangent {
@@ -38,6 +39,10 @@ pub(crate) struct Tangent {
     rhs: Vec<f64>,
     /// One node's `dx`, `dv`, `d(L_q + F)`, `dL_v`.
     node: [Vec<f64>; 4],
+    /// The parameters' values, and per quadrature node and parameter `θ_k` the derivatives
+    /// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` (`2N` entries) of the step just solved.
+    theta: Vec<f64>,
+    pnode: Vec<f64>,
 }
 
 impl Tangent {
@@ -58,16 +63,19 @@ impl Tangent {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
-    /// Starts carrying the tangent with respect to the initial data `(q_0, v_0)`: `2N`
-    /// columns, `dp_0 = C dq_0 + E dv_0` (DESIGN §12). Only before the first step.
+    /// Starts carrying the tangent with respect to the initial data `(q_0, v_0)` and the
+    /// parameters `θ`: `2N + P` columns, `dp_0 = C dq_0 + E dv_0 + ∂L_v/∂θ dθ` (DESIGN §12).
+    /// Only before the first step.
     pub(crate) fn track_tangent(&mut self) -> Result<(), Error> {
         let s = self.scheme.stages();
         let dim = self.backend.z().len();
-        let cols = 2 * N;
+        let theta = self.model.parameter_values();
+        let np = theta.len();
+        let cols = 2 * N + np;
         let mut m = vec![0.0; 2 * N * cols];
         let (q0, v0) = (&self.state.q.sum[..], &self.state.v[..]);
         let (mut dq, mut dv) = (vec![0.0; N], vec![0.0; N]);
-        for c in 0..cols {
+        for c in 0..2 * N {
             dq.fill(0.0);
             dv.fill(0.0);
             if c < N {
@@ -80,6 +88,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             self.backend
                 .momentum_tangent((0.0, q0, v0), (&dq, &dv), &mut col[N..])?;
         }
+        for k in 0..np {
+            let g = parameter_gradient(self.model, (0.0, q0, v0), &theta, k);
+            check_parameter_gradient(&g, 0.0)?;
+            let c = 2 * N + k;
+            m[c * 2 * N + N..(c + 1) * 2 * N].copy_from_slice(g.lv.as_slice());
+        }
         self.tangent = Some(Box::new(Tangent {
             saved: Vec::new(),
             m,
@@ -87,6 +101,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             g: vec![0.0; s * N],
             rhs: vec![0.0; dim],
             node: [vec![0.0; N], vec![0.0; N], vec![0.0; N], vec![0.0; N]],
+            pnode: vec![0.0; self.scheme.quadrature_nodes() * np * 2 * N],
+            theta,
         }));
         Ok(())
     }
@@ -103,12 +119,28 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let (s, h) = (sch.stages(), self.state.h_prev);
         let lay = backend.layout();
         let cols = tg.columns(N);
+        let np = tg.theta.len();
+        // The parameters' terms at the nodes of the solution.
+        let t0 = self.state.t_state - h;
+        for i in 0..sch.quadrature_nodes() {
+            let at = (t0 + sch.c()[i] * h, backend.node_x(i), backend.node_v(i));
+            for k in 0..np {
+                let g = parameter_gradient(self.model, at, &tg.theta, k);
+                if !(all_finite(&g.fq) && all_finite(&g.lv)) {
+                    return Err(StepFailure::Newton(NewtonFailure::NonFinite));
+                }
+                let o = (i * np + k) * 2 * N;
+                tg.pnode[o..o + N].copy_from_slice(g.fq.as_slice());
+                tg.pnode[o + N..o + 2 * N].copy_from_slice(g.lv.as_slice());
+            }
+        }
         for c in 0..cols {
             let col = c * 2 * N;
             for m in 0..s {
                 tg.dx[m * N..(m + 1) * N].copy_from_slice(&tg.m[col..col + N]);
             }
-            linearized_gradients(backend, h, &tg.dx, &mut tg.g, &mut tg.node);
+            let param = (c >= 2 * N).then(|| (&tg.pnode[..], c - 2 * N, np));
+            linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
             for j in 0..s - 1 {
                 for a in 0..N {
                     let dp = if j == 0 { tg.m[col + N + a] } else { 0.0 };
@@ -121,7 +153,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     tg.dx[m * N + a] = tg.m[col + a] + tg.rhs[lay.at(m, a)];
                 }
             }
-            linearized_gradients(backend, h, &tg.dx, &mut tg.g, &mut tg.node);
+            linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
             for a in 0..N {
                 tg.m[col + a] = tg.dx[(s - 1) * N + a];
                 tg.m[col + N + a] = tg.g[(s - 1) * N + a];
@@ -142,8 +174,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let st = &self.state;
         let at = (self.t, &st.q.sum[..], &st.v[..]);
         let mut dv = vec![0.0; N];
-        for mut col in out.column_iter_mut() {
+        for (c, mut col) in out.column_iter_mut().enumerate() {
             let (dq, dp) = col.as_mut_slice().split_at_mut(N);
+            if let Some(k) = c.checked_sub(2 * N) {
+                // E dv = dp − C dq − ∂L_v/∂θ_k.
+                let g = parameter_gradient(self.model, at, &tg.theta, k);
+                check_parameter_gradient(&g, self.t)?;
+                dp.iter_mut().zip(g.lv.iter()).for_each(|(x, y)| *x -= y);
+            }
             self.backend.velocity_tangent(at, (dq, dp), &mut dv)?;
             dp.copy_from_slice(&dv);
         }
@@ -153,12 +191,36 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 }
 
+/// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` at `(t, q, v)`, on a stack deep enough for its dual
+/// numbers.
+fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    (t, q, v): (f64, &[f64], &[f64]),
+    theta: &[f64],
+    k: usize,
+) -> NodeGradient<N> {
+    let (q, v) = (SVector::from_column_slice(q), SVector::from_column_slice(v));
+    with_stack(general::parameter_stack_bytes::<N>(), || {
+        general::node_parameter_gradient_at(model, (t, &q, &v), theta, k)
+    })
+}
+
+fn check_parameter_gradient<const N: usize>(g: &NodeGradient<N>, t: f64) -> Result<(), Error> {
+    if all_finite(&g.fq) && all_finite(&g.lv) {
+        Ok(())
+    } else {
+        Err(Error::NonFiniteModel { step: 0, t })
+    }
+}
+
 /// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx` (`s` blocks of `N`, block 0
-/// the start), with the node blocks of the last [`StepBackend::linearize`].
+/// the start), with the node blocks of the last [`StepBackend::linearize`]; with `param =
+/// (pnode, k, P)`, plus the terms of a unit change of parameter `θ_k`.
 fn linearized_gradients<B: StepBackend>(
     backend: &B,
     h: f64,
     dx: &[f64],
+    param: Option<(&[f64], usize, usize)>,
     g: &mut [f64],
     [dxi, dvi, dfq, dlv]: &mut [Vec<f64>; 4],
 ) {
@@ -176,6 +238,13 @@ fn linearized_gradients<B: StepBackend>(
             }
         }
         backend.apply_node(i, (dxi, dvi), dfq, dlv);
+        if let Some((pnode, k, np)) = param {
+            let o = (i * np + k) * 2 * n;
+            for a in 0..n {
+                dfq[a] += pnode[o + a];
+                dlv[a] += pnode[o + n + a];
+            }
+        }
         let bi = sch.b()[i];
         for j in 0..s {
             let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
