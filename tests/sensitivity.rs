@@ -469,3 +469,133 @@ fn sensitivity_hand_written_models_declare_no_parameters() {
     assert_eq!(s.wrt_parameters.shape(), (2, 0));
     assert!(DrivenDuffing::CHAOTIC.parameter_names().is_empty());
 }
+
+/// The adjoint gradient of `ℓ = ½|q_T|² + w · v_T` against `Sᵀ g` of the forward
+/// sensitivities; returns the larger relative difference (initial data, parameters).
+fn adjoint_against_forward<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+    init: InitialState<N>,
+    t_final: f64,
+) -> f64 {
+    let w = SVector::<f64, N>::from_fn(|a, _| 0.3 - 0.1 * a as f64);
+    let fwd = integ.sensitivities(init, t_final).expect("forward");
+    let adj = integ
+        .adjoint_gradient(init, t_final, |end| (end.q, w))
+        .expect("adjoint");
+    assert_eq!(adj.q, fwd.q);
+    let mut g = nalgebra::DVector::zeros(2 * N);
+    for a in 0..N {
+        g[a] = fwd.q[a];
+        g[N + a] = w[a];
+    }
+    let expect_init = fwd.wrt_initial.transpose() * &g;
+    let expect_par = fwd.wrt_parameters.transpose() * &g;
+    let rel = |a: &nalgebra::DVector<f64>, b: &nalgebra::DVector<f64>| {
+        if b.is_empty() {
+            0.0
+        } else {
+            (a - b).amax() / b.amax().max(f64::MIN_POSITIVE)
+        }
+    };
+    assert_eq!(adj.wrt_parameters.len(), expect_par.len());
+    rel(&adj.wrt_initial, &expect_init).max(rel(&adj.wrt_parameters, &expect_par))
+}
+
+#[test]
+fn sensitivity_adjoint_equals_forward() {
+    let cases: Vec<(&str, f64)> = vec![
+        (
+            "coupled_van_der_pol lobatto3",
+            adjoint_against_forward(
+                &Integrator::new(
+                    &CoupledVanDerPol::PAPER,
+                    Scheme::lobatto(3).expect("s"),
+                    0.01,
+                )
+                .expect("integrator"),
+                InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+                1.0,
+            ),
+        ),
+        (
+            "coupled_van_der_pol midpoint",
+            adjoint_against_forward(
+                &Integrator::new(&CoupledVanDerPol::PAPER, Scheme::midpoint(), 0.01)
+                    .expect("integrator"),
+                InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+                1.0,
+            ),
+        ),
+        (
+            "double_pendulum_friction lobatto5",
+            adjoint_against_forward(
+                &Integrator::new(
+                    &DoublePendulumFriction::DEFAULT,
+                    Scheme::lobatto(5).expect("s"),
+                    0.02,
+                )
+                .expect("integrator"),
+                InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]),
+                3.0,
+            ),
+        ),
+        (
+            "kepler_drag adaptive lobatto4",
+            adjoint_against_forward(
+                &Integrator::adaptive(
+                    &KeplerDrag::DEFAULT,
+                    Scheme::lobatto(4).expect("s"),
+                    1e-8,
+                    1e-8,
+                )
+                .expect("integrator"),
+                InitialState::from_velocity([1.0, 0.0], [0.0, 1.1]),
+                10.0,
+            ),
+        ),
+        (
+            "driven_duffing lobatto3",
+            adjoint_against_forward(
+                &Integrator::new(
+                    &DrivenDuffing::CHAOTIC,
+                    Scheme::lobatto(3).expect("s"),
+                    0.02,
+                )
+                .expect("integrator"),
+                InitialState::from_velocity([1.0], [0.0]),
+                10.0,
+            ),
+        ),
+        (
+            "damped_oscillator lobatto2",
+            adjoint_against_forward(
+                &Integrator::new(
+                    &DampedOscillator::DEFAULT,
+                    Scheme::lobatto(2).expect("s"),
+                    0.05,
+                )
+                .expect("integrator"),
+                InitialState::from_velocity([1.0, -0.5], [0.0, 0.3]),
+                5.0,
+            ),
+        ),
+        (
+            "fpu_chain 12 sparse lobatto3",
+            adjoint_against_forward(
+                &Integrator::new(
+                    &FpuChain::<12>::default(),
+                    Scheme::lobatto(3).expect("s"),
+                    0.05,
+                )
+                .expect("integrator")
+                .linear_path(LinearPath::Sparse),
+                FpuChain::<12>::initial(),
+                3.0,
+            ),
+        ),
+    ];
+    for (name, rel) in cases {
+        eprintln!("{name}: adjoint vs forward {rel:.2e}");
+        assert!(rel < 1e-10, "{name}: {rel:.2e}");
+    }
+}

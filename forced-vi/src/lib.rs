@@ -88,7 +88,8 @@ pub use scalar::{lift, Scalar};
 pub use scheme::{Scheme, SchemeId};
 pub use stepper::Stepper;
 pub use trajectory::{
-    DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord, Trajectory,
+    AdjointGradient, DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord,
+    Trajectory,
 };
 
 /// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.

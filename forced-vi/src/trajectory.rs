@@ -1,7 +1,7 @@
 //! What a run hands back: records with their diagnostics (DESIGN §4), run totals,
 //! trajectories and failures that keep what was computed.
 
-use nalgebra::{DMatrix, SVector};
+use nalgebra::{DMatrix, DVector, SVector};
 
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
@@ -140,6 +140,30 @@ pub struct Sensitivities<const N: usize> {
     /// `∂(q_T, v_T)/∂θ`, `2N × P`, for the model's parameters `θ`.
     pub wrt_parameters: DMatrix<f64>,
     /// Totals.
+    pub stats: RunStats,
+}
+
+/// The gradient of a loss of the final state by the discrete adjoint
+/// ([`crate::Integrator::adjoint_gradient`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdjointGradient<const N: usize> {
+    /// The final time.
+    pub t: f64,
+    /// Final positions.
+    pub q: SVector<f64, N>,
+    /// Final velocities.
+    pub v: SVector<f64, N>,
+    /// Final momenta.
+    pub p: SVector<f64, N>,
+    /// `∂ℓ/∂(q_0, v_0)`, `2N` entries: positions, then velocities.
+    pub wrt_initial: DVector<f64>,
+    /// `∂ℓ/∂θ`, one entry per parameter
+    /// ([`ForcedLagrangian::parameter_names`](crate::ForcedLagrangian::parameter_names)).
+    pub wrt_parameters: DVector<f64>,
+    /// The memory the forward run kept for the backward pass, in bytes (each step's start,
+    /// size and solution).
+    pub tape_bytes: usize,
+    /// Totals of the forward run.
     pub stats: RunStats,
 }
 

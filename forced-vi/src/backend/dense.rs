@@ -7,7 +7,7 @@ use super::{Layout, StepBackend, StepFailure};
 use crate::error::Error;
 use crate::initial::{mass_check, mass_factor, solve_velocity, MIN_MASS_RCOND};
 use crate::model::ForcedLagrangian;
-use crate::newton::{solve_small, Newton, NewtonOptions, NewtonReport};
+use crate::newton::{solve_small, DenseLu, Newton, NewtonOptions, NewtonReport};
 use crate::scalar::all_finite;
 use crate::scheme::Scheme;
 use crate::step_equations::StepProblem;
@@ -19,6 +19,8 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     z: DVector<f64>,
     /// The right-hand side of a tangent solve (made on the first one).
     rhs: DVector<f64>,
+    /// The transposed step Jacobian and its factors, for adjoints (made on first use).
+    adjoint: Option<(DMatrix<f64>, DenseLu)>,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
@@ -46,6 +48,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
             rhs: DVector::zeros(0),
+            adjoint: None,
         }
     }
 }
@@ -229,6 +232,79 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
                 rcond: other.map_or(0.0, |(_, rc)| rc),
             }),
         }
+    }
+
+    fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
+        let p = &self.prob;
+        (p.h, p.t0, p.q0.as_slice(), p.p0.as_slice())
+    }
+
+    fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
+        let prob = &mut self.prob;
+        prob.h = h;
+        prob.t0 = t0;
+        prob.q0.as_mut_slice().copy_from_slice(q0);
+        prob.p0.as_mut_slice().copy_from_slice(p0);
+        self.z.as_mut_slice().copy_from_slice(z);
+        self.newton.invalidate();
+    }
+
+    fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
+        self.linearize()?;
+        let jac = self.newton.jacobian();
+        let dim = jac.nrows();
+        let (jt, lu) = self
+            .adjoint
+            .get_or_insert_with(|| (DMatrix::zeros(dim, dim), DenseLu::new(dim)));
+        jac.transpose_to(jt);
+        lu.factor(jt).map_err(StepFailure::Newton)
+    }
+
+    fn solve_transposed(&mut self, b: &mut [f64]) {
+        let Some((_, lu)) = self.adjoint.as_ref() else {
+            b.fill(f64::NAN);
+            return;
+        };
+        if self.rhs.len() != b.len() {
+            self.rhs = DVector::zeros(b.len());
+        }
+        self.rhs.as_mut_slice().copy_from_slice(b);
+        lu.solve_in_place(&mut self.rhs);
+        b.copy_from_slice(self.rhs.as_slice());
+    }
+
+    fn apply_node_transposed(
+        &self,
+        i: usize,
+        (mf, ml): (&[f64], &[f64]),
+        ux: &mut [f64],
+        uv: &mut [f64],
+    ) {
+        let Some(nj) = self.prob.jacs.get(i) else {
+            ux.fill(f64::NAN);
+            uv.fill(f64::NAN);
+            return;
+        };
+        let (mf, ml) = (vector::<N>(mf), vector::<N>(ml));
+        ux.copy_from_slice((nj.a.tr_mul(&mf) + nj.c.tr_mul(&ml)).as_slice());
+        uv.copy_from_slice((nj.b.tr_mul(&mf) + nj.e.tr_mul(&ml)).as_slice());
+    }
+
+    fn momentum_cotangent(
+        &mut self,
+        (t, q, v): (f64, &[f64], &[f64]),
+        y: &[f64],
+        (cq, ev): (&mut [f64], &mut [f64]),
+    ) -> Result<(), Error> {
+        let nj = self.prob.model.node_jacobian_at(t, &vector(q), &vector(v));
+        let y = vector::<N>(y);
+        let (a, b) = (nj.c.tr_mul(&y), nj.e.tr_mul(&y));
+        if !(all_finite(&a) && all_finite(&b)) {
+            return Err(Error::NonFiniteModel { step: 0, t });
+        }
+        cq.copy_from_slice(a.as_slice());
+        ev.copy_from_slice(b.as_slice());
+        Ok(())
     }
 
     #[inline(always)]

@@ -74,6 +74,8 @@ pub(crate) enum StepFailure {
     SingularMass { rcond: f64 },
     /// A sparse kernel wrote outside the pattern recorded at the first evaluation.
     OutsidePattern,
+    /// What a run keeps per step (an adjoint's tape) no longer fits in memory.
+    Memory { records: usize },
 }
 
 /// The linear algebra of a step. Slices of positions, velocities and momenta have the
@@ -147,6 +149,27 @@ pub(crate) trait StepBackend {
         at: (f64, &[f64], &[f64]),
         dqp: (&[f64], &[f64]),
         dv: &mut [f64],
+    ) -> Result<(), Error>;
+    /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
+    fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
+    /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
+    /// backward pass of an adjoint.
+    fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]);
+    /// Evaluates the node blocks at the solution in [`Self::z`] and factors the transposed
+    /// step Jacobian `Jᵀ` there.
+    fn linearize_transposed(&mut self) -> Result<(), StepFailure>;
+    /// Solves `Jᵀ y = b` in place with the factors of [`Self::linearize_transposed`].
+    fn solve_transposed(&mut self, b: &mut [f64]);
+    /// With the blocks of quadrature node `i`: `ux = Aᵀ mf + Cᵀ ml`, `uv = Bᵀ mf + Eᵀ ml`,
+    /// `m = (mf, ml)`.
+    fn apply_node_transposed(&self, i: usize, m: (&[f64], &[f64]), ux: &mut [f64], uv: &mut [f64]);
+    /// At `at = (t, q, v)`: `cq = Cᵀ y` and `ev = Eᵀ y`, the transposed tangent of
+    /// `p = L_v(t, q, v)`.
+    fn momentum_cotangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        y: &[f64],
+        out: (&mut [f64], &mut [f64]),
     ) -> Result<(), Error>;
     /// Whether the node kernels of this backend need a deep stack (see
     /// [`crate::stepper`]'s stack guard).
@@ -271,6 +294,30 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
         dv: &mut [f64],
     ) -> Result<(), Error> {
         forward!(self, b => b.velocity_tangent(at, d, dv))
+    }
+    fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
+        forward!(self, b => b.step_data())
+    }
+    fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]) {
+        forward!(self, b => b.restore(h, t0, start, z))
+    }
+    fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
+        forward!(self, b => b.linearize_transposed())
+    }
+    fn solve_transposed(&mut self, x: &mut [f64]) {
+        forward!(self, b => b.solve_transposed(x))
+    }
+    #[inline(always)]
+    fn apply_node_transposed(&self, i: usize, m: (&[f64], &[f64]), ux: &mut [f64], uv: &mut [f64]) {
+        forward!(self, b => b.apply_node_transposed(i, m, ux, uv))
+    }
+    fn momentum_cotangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        y: &[f64],
+        out: (&mut [f64], &mut [f64]),
+    ) -> Result<(), Error> {
+        forward!(self, b => b.momentum_cotangent(at, y, out))
     }
     #[inline(always)]
     fn deep_stack(&self) -> bool {

@@ -18,6 +18,9 @@ pub(crate) struct SparseBackend<'a> {
     newton: SparseNewton,
     velocity: VelocitySolver,
     z: Vec<f64>,
+    /// The transposed step Jacobian's solver and where `J`'s values go in it, for
+    /// adjoints (made on first use).
+    adjoint: Option<(SparseLu, Vec<usize>)>,
 }
 
 impl<'a> SparseBackend<'a> {
@@ -45,6 +48,7 @@ impl<'a> SparseBackend<'a> {
             prob,
             newton: SparseNewton::new(lu, newton),
             velocity,
+            adjoint: None,
         })
     }
 }
@@ -202,6 +206,76 @@ impl StepBackend for SparseBackend<'_> {
     ) -> Result<(), Error> {
         let (node, pattern) = (self.prob.node, &self.prob.pattern);
         self.velocity.velocity_tangent(node, pattern, at, d, dv)
+    }
+
+    fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
+        let p = &self.prob;
+        (p.h, p.t0, &p.q0, &p.p0)
+    }
+
+    fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
+        let prob = &mut self.prob;
+        prob.h = h;
+        prob.t0 = t0;
+        prob.q0.copy_from_slice(q0);
+        prob.p0.copy_from_slice(p0);
+        self.z.copy_from_slice(z);
+        self.newton.invalidate();
+    }
+
+    fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
+        self.linearize()?;
+        if self.adjoint.is_none() {
+            let t =
+                self.newton.lu().transposed().map_err(|_| {
+                    StepFailure::Newton(crate::error::NewtonFailure::SingularJacobian)
+                })?;
+            self.adjoint = Some(t);
+        }
+        let Some((lu_t, map)) = self.adjoint.as_mut() else {
+            return Err(StepFailure::Newton(
+                crate::error::NewtonFailure::SingularJacobian,
+            ));
+        };
+        self.newton.lu().fill_transposed(lu_t, map);
+        lu_t.factor().map_err(StepFailure::Newton)
+    }
+
+    fn solve_transposed(&mut self, b: &mut [f64]) {
+        match self.adjoint.as_mut() {
+            Some((lu_t, _)) => lu_t.solve_in_place(b),
+            None => b.fill(f64::NAN),
+        }
+    }
+
+    fn apply_node_transposed(
+        &self,
+        i: usize,
+        (mf, ml): (&[f64], &[f64]),
+        ux: &mut [f64],
+        uv: &mut [f64],
+    ) {
+        let Some(blk) = self.prob.blocks.get(i) else {
+            ux.fill(f64::NAN);
+            uv.fill(f64::NAN);
+            return;
+        };
+        ux.fill(0.0);
+        uv.fill(0.0);
+        for (k, (r, c)) in self.prob.pattern.entries().enumerate() {
+            ux[c] += blk.a[k] * mf[r] + blk.c[k] * ml[r];
+            uv[c] += blk.b[k] * mf[r] + blk.e[k] * ml[r];
+        }
+    }
+
+    fn momentum_cotangent(
+        &mut self,
+        at: (f64, &[f64], &[f64]),
+        y: &[f64],
+        out: (&mut [f64], &mut [f64]),
+    ) -> Result<(), Error> {
+        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        self.velocity.momentum_cotangent(node, pattern, at, y, out)
     }
 
     #[inline(always)]

@@ -403,6 +403,50 @@ pub mod general {
         }
     }
 
+    /// `∂/∂θ_k [νf · (L_q + F) + νl · L_v]` at `(t, q, v)`, for the parameters `theta`:
+    /// the parameter part of an adjoint, from one evaluation of
+    /// [`ForcedLagrangian::lagrangian_with`] with hyper-dual numbers (`ε₁` along `(νf,
+    /// νl)`, `ε₂` along `θ_k`) and one of [`ForcedLagrangian::force_with`] with a dual
+    /// number along `θ_k`. The cost is that of a few evaluations of `L` and `F`, whatever
+    /// `N`.
+    pub fn parameter_contraction<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        (t, q, v): (f64, &[f64], &[f64]),
+        (nf, nl): (&[f64], &[f64]),
+        theta: &[f64],
+        k: usize,
+    ) -> f64 {
+        use num_dual::{Dual64, HyperDual64};
+        let at = |x: &[f64], i: usize| x.get(i).copied().unwrap_or(f64::NAN);
+        let qh: [HyperDual64; N] =
+            std::array::from_fn(|a| HyperDual64::new(at(q, a), at(nf, a), 0.0, 0.0));
+        let vh: [HyperDual64; N] =
+            std::array::from_fn(|a| HyperDual64::new(at(v, a), at(nl, a), 0.0, 0.0));
+        let th: Vec<HyperDual64> = (theta.iter().enumerate())
+            .map(|(j, &x)| HyperDual64::new(x, 0.0, if j == k { 1.0 } else { 0.0 }, 0.0))
+            .collect();
+        let mut out = m
+            .lagrangian_with(HyperDual64::from(t), &qh, &vh, &th)
+            .eps1eps2;
+        if M::STRUCTURE.has_force {
+            let qd: [Dual64; N] = std::array::from_fn(|a| Dual64::from(at(q, a)));
+            let vd: [Dual64; N] = std::array::from_fn(|a| Dual64::from(at(v, a)));
+            let thd: Vec<Dual64> = (theta.iter().enumerate())
+                .map(|(j, &x)| Dual64::new(x, if j == k { 1.0 } else { 0.0 }))
+                .collect();
+            let f = m.force_with(Dual64::from(t), &qd, &vd, &thd);
+            out += (0..N).map(|a| at(nf, a) * f[a].eps).sum::<f64>();
+        }
+        out
+    }
+
+    /// A bound on the stack that [`parameter_contraction`] needs.
+    pub const fn contraction_stack_bytes<const N: usize>() -> usize {
+        N.saturating_mul(std::mem::size_of::<num_dual::HyperDual64>())
+            .saturating_mul(8)
+            .saturating_add(64 * 1024)
+    }
+
     /// The gradient and the blocks `A, B, C, E` at `(q, v)`.
     pub fn node_jacobian<M: ForcedLagrangian<N>, const N: usize>(
         m: &M,

@@ -132,6 +132,11 @@ impl Newton {
         LinearSolver::<S>::refresh(&mut self.linear, sys, z).map(|_| ())
     }
 
+    /// The Jacobian of the last [`Newton::factor_at`] or refresh.
+    pub(crate) fn jacobian(&self) -> &DMatrix<f64> {
+        &self.linear.jac
+    }
+
     /// Solves `J x = b` in place with the factors of [`Newton::factor_at`].
     pub(crate) fn solve_factored(&self, b: &mut DVector<f64>) {
         self.linear.lu.solve_in_place(b);

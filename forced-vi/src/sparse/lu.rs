@@ -143,6 +143,41 @@ impl SparseLu {
         (self.skip, self.backoff) = (0, 0);
     }
 
+    /// A solver for the transposed matrix (zero values), and where each of this matrix's
+    /// values goes in it ([`SparseLu::fill_transposed`]).
+    pub(crate) fn transposed(&self) -> Result<(SparseLu, Vec<usize>), AnalysisFailed> {
+        let n = self.n;
+        let mut col_ptr = vec![0usize; n + 1];
+        for &r in &self.row_idx {
+            col_ptr[r + 1] += 1;
+        }
+        for c in 0..n {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        let mut next = col_ptr.clone();
+        let mut row_idx = vec![0usize; self.row_idx.len()];
+        let mut map = vec![0usize; self.row_idx.len()];
+        // Columns are visited in order, so the rows of each transposed column come out
+        // sorted.
+        for c in 0..n {
+            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let r = self.row_idx[k];
+                row_idx[next[r]] = c;
+                map[k] = next[r];
+                next[r] += 1;
+            }
+        }
+        Ok((SparseLu::new(n, col_ptr, row_idx)?, map))
+    }
+
+    /// Writes the transpose of this matrix's values into `other` (made by
+    /// [`SparseLu::transposed`] with `map`).
+    pub(crate) fn fill_transposed(&self, other: &mut SparseLu, map: &[usize]) {
+        for (&x, &k) in self.values.iter().zip(map) {
+            other.values[k] = x;
+        }
+    }
+
     /// The order of the matrix.
     pub(crate) fn n(&self) -> usize {
         self.n

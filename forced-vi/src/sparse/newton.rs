@@ -74,6 +74,11 @@ impl SparseNewton {
         LinearSolver::<S>::refresh(&mut self.lu, sys, z).map(|_| ())
     }
 
+    /// The Jacobian and its factors.
+    pub(crate) fn lu(&self) -> &SparseLu {
+        &self.lu
+    }
+
     /// Solves `J x = b` in place with the factors of [`SparseNewton::factor_at`].
     pub(crate) fn solve_factored(&mut self, b: &mut [f64]) {
         self.lu.solve_in_place(b);

@@ -137,6 +137,25 @@ impl VelocitySolver {
         Ok(())
     }
 
+    /// The transposed tangent of `p = L_v(t, q, v)`: `cq = Cᵀ y`, `ev = Eᵀ y`.
+    pub(crate) fn momentum_cotangent(
+        &mut self,
+        node: &dyn SparseNode,
+        pattern: &NodePattern,
+        at: (f64, &[f64], &[f64]),
+        y: &[f64],
+        (cq, ev): (&mut [f64], &mut [f64]),
+    ) -> Result<(), Error> {
+        self.eval_blocks(node, pattern, at)?;
+        cq.fill(0.0);
+        ev.fill(0.0);
+        for (k, (r, c)) in pattern.entries().enumerate() {
+            cq[c] += self.blocks.c[k] * y[r];
+            ev[c] += self.blocks.e[k] * y[r];
+        }
+        Ok(())
+    }
+
     /// The tangent of the velocity solve: `E dv = dp − C dq` (DESIGN §12).
     pub(crate) fn velocity_tangent(
         &mut self,

@@ -46,7 +46,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let solved = self.attempt(h, &mut iters).and_then(|res| {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
                 if err <= 1.0 {
-                    self.tangent_step()?;
+                    self.carry()?;
                 }
                 Ok((res, err))
             });
@@ -60,9 +60,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     }
                     self.h_next = self.controller.reject(h, err);
                 }
-                Err(StepFailure::OutsidePattern) => {
+                Err(f @ (StepFailure::OutsidePattern | StepFailure::Memory { .. })) => {
                     self.state.copy_from(&self.saved);
-                    return Err(Error::outside_pattern());
+                    return Err(self.failure_error(f, t0));
                 }
                 Err(f) => {
                     last_failure = Some(f);

@@ -107,6 +107,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         dw
     }
 
+    /// What a sensitivity or adjoint run carries past a solved step: the tangent, then the
+    /// tape. A failed tangent changes nothing; a tape out of memory ends the run.
+    pub(super) fn carry(&mut self) -> Result<(), StepFailure> {
+        self.tangent_step()?;
+        self.tape_step()
+    }
+
     /// One attempt at a step of size `h`: its residual, with the linear solves it took
     /// added to `iters`, converged or not.
     pub(super) fn attempt(&mut self, h: f64, iters: &mut usize) -> Result<f64, StepFailure> {
@@ -142,12 +149,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 if let Some(tg) = self.tangent.as_mut() {
                     tg.save();
                 }
+                if let Some(tape) = self.tape.as_mut() {
+                    tape.save();
+                }
             }
             let mut outcome = Ok(0.0);
             for _ in 0..parts {
                 outcome = self
                     .attempt(hs, &mut iters)
-                    .and_then(|res| self.tangent_step().map(|()| res));
+                    .and_then(|res| self.carry().map(|()| res));
                 if outcome.is_err() {
                     break;
                 }
@@ -170,9 +180,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         if let Some(tg) = self.tangent.as_mut() {
                             tg.restore();
                         }
+                        if let Some(tape) = self.tape.as_mut() {
+                            tape.restore();
+                        }
                     }
-                    if f == StepFailure::OutsidePattern {
-                        return Err(Error::outside_pattern());
+                    if matches!(f, StepFailure::OutsidePattern | StepFailure::Memory { .. }) {
+                        return Err(self.failure_error(f, t0));
                     }
                     last_failure = f;
                     // Retry without the (possibly bad) extrapolation.
@@ -216,6 +229,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         match failure {
             StepFailure::SingularMass { rcond } => Error::SingularMassMatrix { step, t: t0, rcond },
             StepFailure::OutsidePattern => Error::outside_pattern(),
+            StepFailure::Memory { records } => Error::TooManyRecords { records },
             StepFailure::Newton(f) => newton_error(f, self.state.size(), step, t0),
         }
     }

@@ -12,10 +12,12 @@
 //! | adaptive steps: the reference-scheme estimate, the controller, the first step (DESIGN §8) | `adaptive` |
 //! | compensated sums and the state saved for retries | `state` |
 //! | the tangent of the flow for sensitivities (DESIGN §12) | `tangent` |
+//! | the discrete adjoint: the tape and the backward pass (DESIGN §12) | `adjoint` |
 //! | the predictor from the previous step's polynomial | `predict` |
 //! | checks of a run, of initial data, of the time flag; step counts; non-finite values | `checks` |
 
 mod adaptive;
+mod adjoint;
 mod advance;
 mod checks;
 mod predict;
@@ -169,6 +171,8 @@ pub struct Stepper<'a, M, const N: usize> {
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).
     tangent: Option<Box<tangent::Tangent>>,
+    /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).
+    tape: Option<Box<adjoint::Tape>>,
     /// The stack a step needs ([`step_stack_bytes`]).
     stack: usize,
     stats: RunStats,

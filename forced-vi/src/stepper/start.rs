@@ -99,6 +99,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             estimate: 0.0,
             lean: false,
             tangent: None,
+            tape: None,
             stack,
             stats: RunStats::default(),
             started: false,

@@ -1,0 +1,259 @@
+//! The discrete adjoint (DESIGN §12): the gradient of a loss of the final state by
+//! transposed solves backwards over the stored steps.
+//!
+//! The forward run keeps, per accepted step and substep, its size, start time, start
+//! `(q_k, p_k)` and solution `Z` (the tape). Backwards, with `a = (a_q, a_p)` the gradient
+//! of the loss in `(q_{k+1}, p_{k+1})`, each step is linearised again at its stored
+//! solution and, with `K` the map from control-point directions to the linearised
+//! gradients `dG_j` (see the `tangent` module),
+//!
+//! ```text
+//! Jᵀ w = c,   c_m = [Kᵀ (0, …, 0, a_p)]_m + δ_{m,s−1} a_q      (m = 1 … s − 1)
+//! μ_j = −w_j (j ≤ s − 2),   μ_{s−1} = a_p,   u = Kᵀ μ
+//! a_q ← a_q + Σ_m u_m,   a_p ← μ_0,   ∇_θ ℓ += Σ_i ∂/∂θ [νf_i · (L_q + F)_i + νl_i · L_v,i]
+//! ```
+//!
+//! with `νf_i = b_i h Σ_j Φ_ij μ_j` and `νl_i = b_i Σ_j Ψ_ij μ_j`. One transposed solve and
+//! two products with the node blocks per step, whatever the number of parameters; each
+//! parameter adds one hyper-dual evaluation of `L` per node
+//! ([`general::parameter_contraction`]). The ends go through `p_0 = L_v(q_0, v_0; θ)` and
+//! `E v_T = …` as in the forward tangent.
+
+use nalgebra::DVector;
+
+use super::{with_stack, Stepper};
+use crate::backend::{StepBackend, StepFailure};
+use crate::error::Error;
+use crate::model::{general, ForcedLagrangian};
+
+/// The steps of a run, kept for its adjoint.
+pub(crate) struct Tape {
+    /// Per accepted step or substep: `h`, `t0`, `q0`, `p0`, `Z`.
+    data: Vec<f64>,
+    width: usize,
+    /// The length before a subdivided step, restored if it fails.
+    saved: usize,
+    /// The initial `(q_0, v_0)`.
+    start: (Vec<f64>, Vec<f64>),
+}
+
+impl Tape {
+    pub(crate) fn save(&mut self) {
+        self.saved = self.data.len();
+    }
+
+    pub(crate) fn restore(&mut self) {
+        self.data.truncate(self.saved);
+    }
+
+    /// The bytes the tape holds.
+    pub(crate) fn bytes(&self) -> usize {
+        self.data.len() * std::mem::size_of::<f64>()
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// Starts keeping the steps of the run for [`Self::adjoint`]. Only before the first
+    /// step.
+    pub(crate) fn keep_tape(&mut self) {
+        let width = 2 + 2 * N + self.backend.z().len();
+        self.tape = Some(Box::new(Tape {
+            data: Vec::new(),
+            width,
+            saved: 0,
+            start: (self.state.q.sum.clone(), self.state.v.clone()),
+        }));
+    }
+
+    /// Keeps the step just solved (the backend still holds it).
+    pub(super) fn tape_step(&mut self) -> Result<(), StepFailure> {
+        let Some(tape) = self.tape.as_mut() else {
+            return Ok(());
+        };
+        if tape.data.try_reserve(tape.width).is_err() {
+            return Err(StepFailure::Memory {
+                records: tape.data.len() / tape.width + 1,
+            });
+        }
+        let (h, t0, q0, p0) = self.backend.step_data();
+        tape.data.extend_from_slice(&[h, t0]);
+        tape.data.extend_from_slice(q0);
+        tape.data.extend_from_slice(p0);
+        tape.data.extend_from_slice(self.backend.z());
+        Ok(())
+    }
+
+    /// The bytes of the tape kept so far.
+    pub(crate) fn tape_bytes(&self) -> usize {
+        self.tape.as_ref().map_or(0, |t| t.bytes())
+    }
+
+    /// The gradient of a loss `ℓ(q_T, v_T)` whose gradient at the final state is `(gq, gv)`:
+    /// with respect to `(q_0, v_0)` (`2N` entries) and to the parameters (`P`). Call after
+    /// the run, at its final state with the velocity solved.
+    pub(crate) fn adjoint(
+        &mut self,
+        (gq, gv): (&[f64], &[f64]),
+    ) -> Result<(DVector<f64>, DVector<f64>), Error> {
+        let Some(tape) = self.tape.take() else {
+            return Ok((DVector::zeros(2 * N), DVector::zeros(0)));
+        };
+        let theta = self.model.parameter_values();
+        let np = theta.len();
+        let mut grad_theta = vec![0.0; np];
+        let sch = self.scheme;
+        let (s, r) = (sch.stages(), sch.quadrature_nodes());
+        let dim = self.backend.z().len();
+        let lay = self.backend.layout();
+        // The end: v_T from E dv = dp − C dq − L_vθ dθ, so with y = E⁻¹ g_v (E symmetric):
+        // a_q = g_q − Cᵀ y, a_p = y, ∇_θ −= ∂/∂θ (y · L_v).
+        let (t_end, q_end, v_end) = (self.t, self.state.q.sum.clone(), self.state.v.clone());
+        let at = (t_end, &q_end[..], &v_end[..]);
+        let zero = vec![0.0; N];
+        let mut y = vec![0.0; N];
+        self.backend.velocity_tangent(at, (&zero, gv), &mut y)?;
+        let (mut cq, mut ev) = (vec![0.0; N], vec![0.0; N]);
+        self.backend
+            .momentum_cotangent(at, &y, (&mut cq, &mut ev))?;
+        let mut aq: Vec<f64> = gq.iter().zip(&cq).map(|(g, c)| g - c).collect();
+        let mut ap = y.clone();
+        for (k, g) in grad_theta.iter_mut().enumerate() {
+            *g -= contraction(self.model, at, (&zero, &y), &theta, k);
+        }
+        // Backwards over the steps.
+        let (mut mu, mut u) = (vec![0.0; s * N], vec![0.0; s * N]);
+        let mut c = vec![0.0; dim];
+        let mut scratch = [vec![0.0; N], vec![0.0; N], vec![0.0; N], vec![0.0; N]];
+        let (mut nf, mut nl) = (vec![0.0; r * N], vec![0.0; r * N]);
+        let step_fail = |f: StepFailure, t0: f64| self_error(f, t0);
+        for rec in tape.data.chunks_exact(tape.width).rev() {
+            let (h, t0) = (rec[0], rec[1]);
+            let (q0, rest) = rec[2..].split_at(N);
+            let (p0, z) = rest.split_at(N);
+            self.backend.restore(h, t0, (q0, p0), z);
+            self.backend
+                .linearize_transposed()
+                .map_err(|f| step_fail(f, t0))?;
+            // c = S_Zᵀ Kᵀ (0, …, 0, a_p) + a_q at the last control point.
+            mu.fill(0.0);
+            mu[(s - 1) * N..].copy_from_slice(&ap);
+            transposed_gradients(
+                &self.backend,
+                h,
+                &mu,
+                (&mut nf, &mut nl),
+                &mut u,
+                &mut scratch,
+            );
+            for m in 1..s {
+                for a in 0..N {
+                    let last = if m == s - 1 { aq[a] } else { 0.0 };
+                    c[lay.at(m, a)] = u[m * N + a] + last;
+                }
+            }
+            self.backend.solve_transposed(&mut c);
+            for j in 0..s - 1 {
+                for a in 0..N {
+                    mu[j * N + a] = -c[lay.at(j + 1, a)];
+                }
+            }
+            mu[(s - 1) * N..].copy_from_slice(&ap);
+            transposed_gradients(
+                &self.backend,
+                h,
+                &mu,
+                (&mut nf, &mut nl),
+                &mut u,
+                &mut scratch,
+            );
+            for a in 0..N {
+                aq[a] += (0..s).map(|m| u[m * N + a]).sum::<f64>();
+                ap[a] = mu[a];
+            }
+            for i in 0..r {
+                let ti = t0 + sch.c()[i] * h;
+                let at = (ti, self.backend.node_x(i), self.backend.node_v(i));
+                let w = (&nf[i * N..(i + 1) * N], &nl[i * N..(i + 1) * N]);
+                for (k, g) in grad_theta.iter_mut().enumerate() {
+                    *g += contraction(self.model, at, w, &theta, k);
+                }
+            }
+            if !(aq.iter().chain(&ap).all(|x| x.is_finite())) {
+                return Err(Error::NonFiniteModel { step: 0, t: t0 });
+            }
+        }
+        // The start: p_0 = L_v(q_0, v_0; θ).
+        let st = &tape.start;
+        let at = (0.0, &st.0[..], &st.1[..]);
+        self.backend
+            .momentum_cotangent(at, &ap, (&mut cq, &mut ev))?;
+        let mut grad = DVector::zeros(2 * N);
+        for a in 0..N {
+            grad[a] = aq[a] + cq[a];
+            grad[N + a] = ev[a];
+        }
+        for (k, g) in grad_theta.iter_mut().enumerate() {
+            *g += contraction(self.model, at, (&zero, &ap), &theta, k);
+        }
+        if !(grad.iter().chain(&grad_theta).all(|x| x.is_finite())) {
+            return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+        }
+        Ok((grad, DVector::from_vec(grad_theta)))
+    }
+}
+
+/// The error of a step that the backward pass could not linearise again.
+fn self_error(f: StepFailure, t: f64) -> Error {
+    match f {
+        StepFailure::Memory { records } => Error::TooManyRecords { records },
+        _ => Error::NonFiniteModel { step: 0, t },
+    }
+}
+
+/// `∂/∂θ_k [nf · (L_q + F) + nl · L_v]` at `at`, on a stack deep enough for its duals.
+fn contraction<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    at: (f64, &[f64], &[f64]),
+    w: (&[f64], &[f64]),
+    theta: &[f64],
+    k: usize,
+) -> f64 {
+    with_stack(general::contraction_stack_bytes::<N>(), || {
+        general::parameter_contraction(model, at, w, theta, k)
+    })
+}
+
+/// `u = Kᵀ μ` (`s` blocks of `N`, block 0 the start), with the node weights
+/// `νf_i = b_i h Σ_j Φ_ij μ_j`, `νl_i = b_i Σ_j Ψ_ij μ_j` left in `(nf, nl)`.
+fn transposed_gradients<B: StepBackend>(
+    backend: &B,
+    h: f64,
+    mu: &[f64],
+    (nf, nl): (&mut [f64], &mut [f64]),
+    u: &mut [f64],
+    [ux, uv, _, _]: &mut [Vec<f64>; 4],
+) {
+    let sch = backend.scheme();
+    let (s, n) = (sch.stages(), ux.len());
+    u.fill(0.0);
+    for i in 0..sch.quadrature_nodes() {
+        let bi = sch.b()[i];
+        let (fi, li) = (&mut nf[i * n..(i + 1) * n], &mut nl[i * n..(i + 1) * n]);
+        fi.fill(0.0);
+        li.fill(0.0);
+        for j in 0..s {
+            let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+            for a in 0..n {
+                fi[a] += cf * mu[j * n + a];
+                li[a] += cl * mu[j * n + a];
+            }
+        }
+        backend.apply_node_transposed(i, (fi, li), ux, uv);
+        for m in 0..s {
+            let (phi, psi) = (sch.phi(i, m), sch.psi(i, m) / h);
+            for a in 0..n {
+                u[m * n + a] += phi * ux[a] + psi * uv[a];
+            }
+        }
+    }
+}
