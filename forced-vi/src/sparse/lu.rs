@@ -160,10 +160,10 @@ impl SparseLu {
         // Columns are visited in order, so the rows of each transposed column come out
         // sorted.
         for c in 0..n {
-            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                let r = self.row_idx[k];
+            let range = self.col_ptr[c]..self.col_ptr[c + 1];
+            for (slot, &r) in map[range.clone()].iter_mut().zip(&self.row_idx[range]) {
                 row_idx[next[r]] = c;
-                map[k] = next[r];
+                *slot = next[r];
                 next[r] += 1;
             }
         }

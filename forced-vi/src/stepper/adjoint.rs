@@ -166,10 +166,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 &mut u,
                 &mut scratch,
             );
-            for a in 0..N {
-                aq[a] += (0..s).map(|m| u[m * N + a]).sum::<f64>();
-                ap[a] = mu[a];
+            for (a, x) in aq.iter_mut().enumerate() {
+                *x += (0..s).map(|m| u[m * N + a]).sum::<f64>();
             }
+            ap.copy_from_slice(&mu[..N]);
             for i in 0..r {
                 let ti = t0 + sch.c()[i] * h;
                 let at = (ti, self.backend.node_x(i), self.backend.node_v(i));
