@@ -13,6 +13,7 @@
 //! regenerate the references, then add one `scene!(...)` line to [`all`].
 
 use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme};
+use nalgebra::DMatrix;
 
 use crate::baselines::{self, Baseline, BaselineError, OdeSystem};
 use crate::models::{
@@ -118,6 +119,12 @@ pub trait Scene: Send + Sync {
         tol: f64,
         member: usize,
     ) -> Result<Outcome, SceneError>;
+    /// How much the flow amplifies an error made along a run of member 0: the mean over
+    /// `points` times `t ∈ (0, T)` of `‖Φ_q(T, t)‖∞`, the rows in `q_T` of the tangent map
+    /// from `(q, p)` at `t` to `(q, p)` at `T` (max row sum). Local errors of size `δ` per
+    /// unit step add up to a final error of about `δ` times this. From
+    /// [`Integrator::sensitivities`] (lobatto4, 4000 steps over the run).
+    fn amplification(&self, points: usize) -> Result<f64, SceneError>;
     /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
     fn balance_variational(
         &self,
@@ -332,6 +339,48 @@ where
     ) -> Result<Outcome, SceneError> {
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ, member)
+    }
+    fn amplification(&self, points: usize) -> Result<f64, SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let init = InitialState::from_velocity(q0, v0);
+        let h = self.t_final / 4000.0;
+        let scheme = Scheme::lobatto(4).map_err(forced_vi::Error::from)?;
+        let integ = Integrator::new(&self.model, scheme, h)?;
+        // The (q, p) tangent M(t, 0) = P(t) S(t) P(0)⁻¹, with P = [[I, 0], [C, E]].
+        let to_p = |t: f64, q: &[f64], v: &[f64]| {
+            let j = self.model.node_jacobian_at(
+                t,
+                &nalgebra::SVector::from_column_slice(q),
+                &nalgebra::SVector::from_column_slice(v),
+            );
+            let mut m = DMatrix::<f64>::identity(2 * N, 2 * N);
+            for r in 0..N {
+                for c in 0..N {
+                    m[(N + r, c)] = j.c[(r, c)];
+                    m[(N + r, N + c)] = j.e[(r, c)];
+                }
+            }
+            m
+        };
+        let singular = || SceneError::Reference {
+            scene: self.name,
+            message: "a singular tangent map".into(),
+        };
+        let p0_inv = to_p(0.0, &q0, &v0).try_inverse().ok_or_else(singular)?;
+        let tangent = |t: f64| -> Result<DMatrix<f64>, SceneError> {
+            let s = integ.sensitivities(init, t).map_err(|f| f.error)?;
+            Ok(to_p(s.t, s.q.as_slice(), s.v.as_slice()) * s.wrt_initial * &p0_inv)
+        };
+        let end = tangent(self.t_final)?;
+        let mut sum = 0.0;
+        for j in 0..points {
+            let t = self.t_final * (j as f64 + 0.5) / points as f64;
+            let phi = &end * tangent(t)?.try_inverse().ok_or_else(singular)?;
+            sum += (0..N)
+                .map(|r| phi.row(r).iter().map(|x| x.abs()).sum::<f64>())
+                .fold(0.0, f64::max);
+        }
+        Ok(sum / points as f64)
     }
     fn run_baseline(
         &self,
