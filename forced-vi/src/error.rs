@@ -171,6 +171,22 @@ pub enum Error {
         /// The cap.
         steps: usize,
     },
+    /// Initial data off the constraint manifold of a constrained model (DESIGN §11).
+    #[error("the initial {what} violates the constraints: residual {residual:.3e} (at most {tol:.1e}); InitialState::projected makes it consistent")]
+    InconsistentInitialState {
+        /// `"position"` (`g(q_0) ≠ 0`) or `"velocity"` (`G(q_0) v_0 ≠ 0`).
+        what: &'static str,
+        /// The largest residual.
+        residual: f64,
+        /// The tolerance it exceeds.
+        tol: f64,
+    },
+    /// A constrained model that this run cannot take (see the message).
+    #[error("constraints: {message}")]
+    UnsupportedConstraints {
+        /// What is not supported.
+        message: &'static str,
+    },
     /// Output times that decrease.
     #[error("output times must be non-decreasing")]
     UnorderedTimes,
@@ -271,6 +287,8 @@ impl Error {
             Error::InvalidModel { .. } => "invalid_model".into(),
             Error::InvalidTolerance { .. } => "invalid_tolerance".into(),
             Error::UnorderedTimes => "unordered_times".into(),
+            Error::InconsistentInitialState { .. } => "inconsistent_initial_state".into(),
+            Error::UnsupportedConstraints { .. } => "unsupported_constraints".into(),
             Error::StepSizeTooSmall { .. } => "step_size_too_small".into(),
             Error::InvalidStepBounds { .. } => "invalid_step_bounds".into(),
             Error::MaxStepsReached { .. } => "max_steps_reached".into(),

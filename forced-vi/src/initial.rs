@@ -1,7 +1,7 @@
 //! Initial data and the velocity solve `L_v(q, v) = p` (DESIGN §3, "Initial data"), with
 //! the mass-matrix checks that both need.
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use crate::error::Error;
 use crate::model::ForcedLagrangian;
@@ -175,4 +175,97 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
         t,
         residual: r.amax(),
     })
+}
+
+/// The tolerance of [`check_constraints`], relative to the size of the data.
+pub const CONSTRAINT_TOL: f64 = 1e-10;
+
+/// `g(q_0)` and `G(q_0) v_0` of a constrained model (DESIGN §11): `(g, G v)`.
+fn constraint_residuals<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+) -> (DVector<f64>, DVector<f64>, DMatrix<f64>) {
+    let m = model.constraint_count();
+    let mut g = DVector::zeros(m);
+    let mut jac = DMatrix::zeros(m, N);
+    crate::model::general::constraint_jacobian_at(model, 0.0, q, g.as_mut_slice(), &mut jac);
+    let gv = &jac * DVector::from_column_slice(v.as_slice());
+    (g, gv, jac)
+}
+
+/// Checks that initial data lie on the constraints: `|g(q_0)| ≤ 10⁻¹⁰ (1 + |q_0|)` and
+/// `|G(q_0) v_0| ≤ 10⁻¹⁰ max(1, |G| |v_0|)` (max-norms), else
+/// [`Error::InconsistentInitialState`].
+pub(crate) fn check_constraints<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &[f64],
+    v: &[f64],
+) -> Result<(), Error> {
+    if model.constraint_count() == 0 {
+        return Ok(());
+    }
+    let (q, v) = (SVector::from_column_slice(q), SVector::from_column_slice(v));
+    let (g, gv, jac) = constraint_residuals(model, &q, &v);
+    let tol_q = CONSTRAINT_TOL * (1.0 + q.amax());
+    let tol_v = CONSTRAINT_TOL * (jac.amax() * v.amax()).max(1.0);
+    for (what, r, tol) in [
+        ("position", g.amax(), tol_q),
+        ("velocity", gv.amax(), tol_v),
+    ] {
+        if r.is_nan() || r > tol {
+            return Err(Error::InconsistentInitialState {
+                what,
+                residual: r,
+                tol,
+            });
+        }
+    }
+    Ok(())
+}
+
+impl<const N: usize> InitialState<N> {
+    /// The initial state `(q, v)` of a constrained model made consistent (DESIGN §11):
+    /// `q` moved onto `g(q) = 0` by Gauss–Newton steps of least change
+    /// (`q ← q − Gᵀ(GGᵀ)⁻¹ g`), then `v` projected onto `G v = 0` the same way. A typed error
+    /// if the constraints are singular at `q` or the projection does not converge.
+    pub fn projected<M: ForcedLagrangian<N>>(
+        model: &M,
+        q: [f64; N],
+        v: [f64; N],
+    ) -> Result<Self, Error> {
+        let (mut q, mut v) = (SVector::from(q), SVector::from(v));
+        let singular = Error::UnsupportedConstraints {
+            message: "the constraints are singular (G Gᵀ not invertible) at the initial state",
+        };
+        let mut done = false;
+        for _ in 0..50 {
+            let (g, _, jac) = constraint_residuals(model, &q, &v);
+            if !(g.iter().all(|x| x.is_finite()) && jac.iter().all(|x| x.is_finite())) {
+                return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+            }
+            if g.amax() <= 0.01 * CONSTRAINT_TOL * (1.0 + q.amax()) {
+                done = true;
+                break;
+            }
+            let y = (&jac * jac.transpose())
+                .lu()
+                .solve(&g)
+                .ok_or(singular.clone())?;
+            let dq = jac.transpose() * y;
+            q -= SVector::<f64, N>::from_column_slice(dq.as_slice());
+        }
+        if !done {
+            let (g, _, _) = constraint_residuals(model, &q, &v);
+            return Err(Error::InconsistentInitialState {
+                what: "position",
+                residual: g.amax(),
+                tol: CONSTRAINT_TOL * (1.0 + q.amax()),
+            });
+        }
+        let (_, gv, jac) = constraint_residuals(model, &q, &v);
+        let y = (&jac * jac.transpose()).lu().solve(&gv).ok_or(singular)?;
+        v -= SVector::<f64, N>::from_column_slice((jac.transpose() * y).as_slice());
+        Ok(InitialState::from_velocity(q.into(), v.into()))
+    }
 }

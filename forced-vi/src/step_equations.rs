@@ -26,6 +26,12 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     /// For a constant mass matrix, the `E` part of the Jacobian for the step size `base_h`.
     pub(crate) base: DMatrix<f64>,
     pub(crate) base_h: f64,
+    /// Holonomic constraints (DESIGN §11): their number `m`, and scratch for `g` and, per
+    /// control point, `G = ∂g/∂q` (`m × N`). The unknowns `λ_0 … λ_{s−2}` follow the
+    /// increments in `z`; the rows `g(x_j)/h`, `j = 1 … s − 1`, follow the gradient rows.
+    pub(crate) cons: usize,
+    pub(crate) gval: Vec<f64>,
+    pub(crate) gjac: Vec<DMatrix<f64>>,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
@@ -78,6 +84,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             }
             rs[j * N..(j + 1) * N].copy_from_slice(gj.as_slice());
         }
+        if self.cons > 0 {
+            self.constraint_rows(z, r, None)?;
+        }
         Ok(())
     }
 
@@ -98,7 +107,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             }
         }
         let constant_mass = M::STRUCTURE.constant_mass;
-        let rows = (sch.stages() - 1) * N;
+        let rows = jac.nrows();
         if constant_mass {
             // E is the same at every node and every step: its part is built once per h.
             if self.base_h != h {
@@ -128,6 +137,93 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                     add_block(js, rows, t.j, t.m, t.c, &nj.c);
                 }
                 add_block(js, rows, t.j, t.m, t.e / h, &nj.e);
+            }
+        }
+        if self.cons > 0 {
+            let mut scratch = DVector::zeros(0);
+            self.constraint_rows(z, &mut scratch, Some(jac))?;
+        }
+        Ok(())
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
+    /// The constraint terms of the step equations (DESIGN §11, Lobatto schemes: control
+    /// point `j` is quadrature node `j`): `−h b_j G(x_j)ᵀ λ_j` in the gradient rows and the
+    /// rows `g(x_j)/h`; with `jac`, their derivatives instead (`−h b_j G(x_j)ᵀ` in the `λ_j`
+    /// columns, `−h b_j Σ_r λ_{j,r} ∂²g_r` on the diagonal blocks, `G(x_j)/h` in the
+    /// constraint rows). The node positions must be those of `z`.
+    fn constraint_rows(
+        &mut self,
+        z: &DVector<f64>,
+        r: &mut DVector<f64>,
+        mut jac: Option<&mut DMatrix<f64>>,
+    ) -> Result<(), NewtonFailure> {
+        let (sch, h, m) = (self.scheme, self.h, self.cons);
+        let s = sch.stages();
+        let nz = (s - 1) * N;
+        let zs = z.as_slice();
+        for j in 0..s {
+            let x = if j == 0 { self.q0 } else { self.xs[j] };
+            let t = self.t0 + sch.c()[j] * h;
+            crate::model::general::constraint_jacobian_at(
+                self.model,
+                t,
+                &x,
+                &mut self.gval,
+                &mut self.gjac[j],
+            );
+            let gj = &self.gjac[j];
+            if !(self.gval.iter().all(|v| v.is_finite()) && gj.iter().all(|v| v.is_finite())) {
+                return Err(NewtonFailure::NonFinite);
+            }
+            let hb = h * sch.b()[j];
+            match jac.as_deref_mut() {
+                None => {
+                    let rs = r.as_mut_slice();
+                    if j >= 1 {
+                        for (k, g) in self.gval.iter().enumerate() {
+                            rs[nz + (j - 1) * m + k] = g / h;
+                        }
+                    }
+                    if j + 1 < s {
+                        let lam = &zs[nz + j * m..nz + (j + 1) * m];
+                        for a in 0..N {
+                            let f: f64 = (0..m).map(|k| gj[(k, a)] * lam[k]).sum();
+                            rs[j * N + a] -= hb * f;
+                        }
+                    }
+                }
+                Some(jm) => {
+                    if j + 1 < s {
+                        for k in 0..m {
+                            for a in 0..N {
+                                jm[(j * N + a, nz + j * m + k)] = -hb * gj[(k, a)];
+                            }
+                        }
+                        if j >= 1 {
+                            let lam = &zs[nz + j * m..nz + (j + 1) * m];
+                            let curv = crate::model::general::constraint_curvature_at(
+                                self.model, t, &x, lam,
+                            );
+                            if !all_finite(&curv) {
+                                return Err(NewtonFailure::NonFinite);
+                            }
+                            for c in 0..N {
+                                for a in 0..N {
+                                    jm[(j * N + a, (j - 1) * N + c)] -= hb * curv[(a, c)];
+                                }
+                            }
+                        }
+                    }
+                    if j >= 1 {
+                        for k in 0..m {
+                            for a in 0..N {
+                                jm[(nz + (j - 1) * m + k, (j - 1) * N + a)] = gj[(k, a)] / h;
+                            }
+                        }
+                    }
+                }
             }
         }
         Ok(())

@@ -4,7 +4,7 @@
 use nalgebra::{DMatrix, DVector, SVector};
 
 use super::{Layout, StepBackend, StepFailure};
-use crate::error::Error;
+use crate::error::{Error, NewtonFailure};
 use crate::initial::{mass_check, mass_factor, solve_velocity, MIN_MASS_RCOND};
 use crate::model::ForcedLagrangian;
 use crate::newton::{solve_small, DenseLu, Newton, NewtonOptions, NewtonReport};
@@ -21,13 +21,17 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     rhs: DVector<f64>,
     /// The transposed step Jacobian and its factors, for adjoints (made on first use).
     adjoint: Option<(DMatrix<f64>, DenseLu)>,
+    /// A constrained model: the momentum of the constraint forces over the last step,
+    /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11).
+    impulse: SVector<f64, N>,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
     /// Buffers for `model` and `scheme`.
     pub(crate) fn new(model: &'a M, scheme: &'a Scheme, newton: NewtonOptions) -> Self {
         let (s, r) = (scheme.stages(), scheme.quadrature_nodes());
-        let dim = (s - 1) * N;
+        let cons = model.constraint_count();
+        let dim = (s - 1) * (N + cons);
         let zero = SVector::<f64, N>::zeros();
         let grad = crate::model::NodeGradient { fq: zero, lv: zero };
         DenseBackend {
@@ -44,12 +48,105 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 jacs: Vec::with_capacity(r),
                 base: DMatrix::zeros(dim, dim),
                 base_h: f64::NAN,
+                cons,
+                gval: vec![0.0; cons],
+                gjac: vec![DMatrix::zeros(cons, N); s],
             },
+            impulse: SVector::zeros(),
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
             rhs: DVector::zeros(0),
             adjoint: None,
         }
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
+    /// The end of a constrained step (DESIGN §11): the multiplier `μ = λ_{s−1}` and the
+    /// velocity `v_{k+1}` with `L_v(q_{k+1}, v_{k+1}) + h b_{s−1} G(q_{k+1})ᵀ μ = p̃` and
+    /// `G(q_{k+1}) v_{k+1} = 0`, by Newton on the saddle-point matrix `[[E, h b Gᵀ], [G, 0]]`;
+    /// then the impulse of the constraint forces over the step. `G(x_j)` are those of the
+    /// last residual evaluation, which was at the solution.
+    fn project(&mut self) -> Result<(), StepFailure> {
+        let prob = &self.prob;
+        let (sch, h, m) = (prob.scheme, prob.h, prob.cons);
+        let s = sch.stages();
+        let nz = (s - 1) * N;
+        let zs = self.z.as_slice();
+        let mut ptil = prob.p0;
+        for (i, g) in prob.grads.iter().enumerate() {
+            ptil += g.fq * (h * sch.b()[i]);
+        }
+        let mut imp = SVector::<f64, N>::zeros();
+        for j in 0..s - 1 {
+            let lam = &zs[nz + j * m..nz + (j + 1) * m];
+            let gj = &prob.gjac[j];
+            for a in 0..N {
+                imp[a] += h * sch.b()[j] * (0..m).map(|k| gj[(k, a)] * lam[k]).sum::<f64>();
+            }
+        }
+        ptil -= imp;
+        let c = h * sch.b()[s - 1];
+        let g1 = &prob.gjac[s - 1];
+        let (t1, q1) = (prob.t0 + h, prob.xs[s - 1]);
+        let mut v = prob.vs[s - 1];
+        let mut mu = DVector::<f64>::zeros(m);
+        let mut kkt = DMatrix::<f64>::zeros(N + m, N + m);
+        let mut rhs = DVector::<f64>::zeros(N + m);
+        let mut converged = false;
+        for it in 0..30 {
+            let nj = prob.model.node_jacobian_at(t1, &q1, &v);
+            let mut size = (0.0f64, 0.0f64);
+            for a in 0..N {
+                let gt_mu: f64 = (0..m).map(|k| g1[(k, a)] * mu[k]).sum();
+                rhs[a] = -(nj.grad.lv[a] + c * gt_mu - ptil[a]);
+                size.0 = size
+                    .0
+                    .max(nj.grad.lv[a].abs() + (c * gt_mu).abs() + ptil[a].abs());
+                for b in 0..N {
+                    kkt[(a, b)] = nj.e[(a, b)];
+                }
+                for k in 0..m {
+                    kkt[(a, N + k)] = c * g1[(k, a)];
+                    kkt[(N + k, a)] = g1[(k, a)];
+                }
+            }
+            for k in 0..m {
+                rhs[N + k] = -(0..N).map(|a| g1[(k, a)] * v[a]).sum::<f64>();
+                size.1 = size
+                    .1
+                    .max((0..N).map(|a| (g1[(k, a)] * v[a]).abs()).sum::<f64>());
+            }
+            // Converged when both residuals are at the round-off of their terms.
+            let noise = 16.0 * f64::EPSILON * (N + m) as f64;
+            let (r1, r2) = (rhs.rows(0, N).amax(), rhs.rows(N, m).amax());
+            if it > 0 && r1 <= noise * size.0 && r2 <= noise * size.1.max(f64::MIN_POSITIVE) {
+                converged = true;
+                break;
+            }
+            let Some(d) = kkt.clone().lu().solve(&rhs) else {
+                return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+            };
+            if !d.iter().all(|x| x.is_finite()) {
+                return Err(StepFailure::Newton(NewtonFailure::NonFinite));
+            }
+            for a in 0..N {
+                v[a] += d[a];
+            }
+            for k in 0..m {
+                mu[k] += d[N + k];
+            }
+        }
+        if !converged {
+            return Err(StepFailure::Newton(NewtonFailure::MaxIterations {
+                residual: rhs.amax(),
+            }));
+        }
+        for a in 0..N {
+            imp[a] += c * (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
+        }
+        self.impulse = imp;
+        Ok(())
     }
 }
 
@@ -94,9 +191,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         prob.q0.as_mut_slice().copy_from_slice(q0);
         prob.p0.as_mut_slice().copy_from_slice(p0);
         self.newton.invalidate();
-        self.newton
+        let report = self
+            .newton
             .solve(prob, &mut self.z, scale)
-            .map_err(StepFailure::Newton)
+            .map_err(StepFailure::Newton)?;
+        if self.prob.cons > 0 {
+            self.project()?;
+        }
+        Ok(report)
     }
 
     #[inline(always)]
@@ -232,6 +334,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
                 rcond: other.map_or(0.0, |(_, rc)| rc),
             }),
         }
+    }
+
+    fn constraint_impulse(&self) -> Option<&[f64]> {
+        (self.prob.cons > 0).then_some(self.impulse.as_slice())
     }
 
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {

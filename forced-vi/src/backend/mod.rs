@@ -150,6 +150,9 @@ pub(crate) trait StepBackend {
         dqp: (&[f64], &[f64]),
         dv: &mut [f64],
     ) -> Result<(), Error>;
+    /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
+    /// over the last solved step (DESIGN §11); `None` without constraints.
+    fn constraint_impulse(&self) -> Option<&[f64]>;
     /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
     /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
@@ -294,6 +297,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
         dv: &mut [f64],
     ) -> Result<(), Error> {
         forward!(self, b => b.velocity_tangent(at, d, dv))
+    }
+    #[inline(always)]
+    fn constraint_impulse(&self) -> Option<&[f64]> {
+        forward!(self, b => b.constraint_impulse())
     }
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         forward!(self, b => b.step_data())

@@ -208,6 +208,10 @@ impl StepBackend for SparseBackend<'_> {
         self.velocity.velocity_tangent(node, pattern, at, d, dv)
     }
 
+    fn constraint_impulse(&self) -> Option<&[f64]> {
+        None
+    }
+
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         let p = &self.prob;
         (p.h, p.t0, &p.q0, &p.p0)

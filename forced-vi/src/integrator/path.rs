@@ -82,6 +82,18 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         scheme: &'s Scheme,
         newton: NewtonOptions,
     ) -> Result<Backend<'s, M, N>, Error> {
+        if self.model.constraint_count() > 0 {
+            check_constrained(self.model, scheme)?;
+            if self.linear_path == LinearPath::Sparse {
+                return Err(Error::UnsupportedConstraints {
+                    message: "a constrained model runs on the dense backend only",
+                });
+            }
+            check_dense::<M, N>()?;
+            return Ok(Backend::Dense(DenseBackend::new(
+                self.model, scheme, newton,
+            )));
+        }
         #[cfg(feature = "sparse")]
         if let Some(backend) = self.sparse_backend(init, scheme, newton)? {
             return Ok(Backend::Sparse(backend));
@@ -147,6 +159,25 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 /// Refuses a model too large for the dense backend: more than
 /// [`LinearPath::DENSE_MAX_DOF`] coordinates, or kernels that need more stack than
 /// [`MAX_KERNEL_STACK`].
+/// A constrained model needs fewer constraints than coordinates and a Lobatto scheme (its
+/// multipliers live at the control points, DESIGN §11).
+fn check_constrained<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    scheme: &Scheme,
+) -> Result<(), Error> {
+    if model.constraint_count() >= N {
+        return Err(Error::UnsupportedConstraints {
+            message: "as many constraints as coordinates or more: no coordinate is left free",
+        });
+    }
+    if !matches!(scheme.id(), crate::SchemeId::Lobatto(_)) {
+        return Err(Error::UnsupportedConstraints {
+            message: "constrained models need a Lobatto scheme (lobatto2 is RATTLE)",
+        });
+    }
+    Ok(())
+}
+
 pub(super) fn check_dense<M: ForcedLagrangian<N>, const N: usize>() -> Result<(), Error> {
     if N > LinearPath::DENSE_MAX_DOF || M::KERNEL_STACK_BYTES > MAX_KERNEL_STACK {
         return Err(Error::ModelTooLarge {

@@ -163,6 +163,17 @@ pub trait ForcedLagrangian<const N: usize> {
         self.force_at(t, q, v)
     }
 
+    /// The number `m` of holonomic constraints `g(t, q) = 0` (DESIGN §11); none by default.
+    fn constraint_count(&self) -> usize {
+        0
+    }
+
+    /// The constraints `g(t, q)`, `m` values written to `g`. Each must vanish on the
+    /// motion; they may not read velocities (nonholonomic constraints are not supported).
+    fn constraints<D: Scalar>(&self, t: D, q: &[D; N], g: &mut [D]) {
+        let _ = (t, q, g);
+    }
+
     /// Stack bytes that one call of a node kernel may need. The integrator runs the
     /// kernels on a stack at least this deep (growing it on the heap when the caller's is
     /// too shallow), so a large model cannot overflow a 2 MiB thread stack. The default
@@ -337,6 +348,53 @@ pub mod general {
             SVector::zeros()
         };
         NodeGradient { fq: lq + f, lv }
+    }
+
+    /// `g(t, q)` into `g` and its Jacobian `G = ∂g/∂q` (`m × N`) into `jac`, from
+    /// [`ForcedLagrangian::constraints`] with one dual-number gradient per constraint.
+    pub fn constraint_jacobian_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        t: f64,
+        q: &SVector<f64, N>,
+        g: &mut [f64],
+        jac: &mut nalgebra::DMatrix<f64>,
+    ) {
+        let count = m.constraint_count();
+        for r in 0..count.min(g.len()).min(jac.nrows()) {
+            let (value, grad) = gradient(
+                |x: SVector<DualSVec64<N>, N>| {
+                    let mut out = vec![DualSVec64::<N>::from(0.0); count];
+                    m.constraints(t.into(), &arr(&x), &mut out);
+                    out[r]
+                },
+                q,
+            );
+            g[r] = value;
+            for c in 0..N {
+                jac[(r, c)] = grad[c];
+            }
+        }
+    }
+
+    /// `Σ_r λ_r ∂²g_r/∂q²` at `(t, q)`, the constraints' curvature weighted by the
+    /// multipliers.
+    pub fn constraint_curvature_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        t: f64,
+        q: &SVector<f64, N>,
+        lambda: &[f64],
+    ) -> SMatrix<f64, N, N> {
+        let count = m.constraint_count();
+        let (_, _, h) = hessian(
+            |x: SVector<Dual2SVec64<N>, N>| {
+                let mut out = vec![Dual2SVec64::<N>::from(0.0); count];
+                m.constraints(t.into(), &arr(&x), &mut out);
+                (out.iter().zip(lambda))
+                    .fold(Dual2SVec64::<N>::from(0.0), |acc, (g, &l)| acc + *g * l)
+            },
+            q,
+        );
+        h
     }
 
     /// A bound on the stack that [`node_parameter_gradient_at`] needs.

@@ -65,6 +65,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 fmax = fmax.max(f.abs());
             }
         }
+        if let Some(imp) = backend.constraint_impulse() {
+            dp.iter_mut().zip(imp).for_each(|(d, i)| *d -= i);
+        }
         for (a, &d) in dp.iter().enumerate() {
             st.q.add(a, z[lay.at(s1, a)]);
             st.p.add(a, d);

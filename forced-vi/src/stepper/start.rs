@@ -66,6 +66,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         };
         let mut state = State::new(N, backend.z().len());
         let mass_sign = initial_state(&mut backend, &mut state, init)?;
+        crate::initial::check_constraints(model, &state.q.sum, &state.v)?;
         check_time_flag(model, &state.q.sum, &state.v)?;
         let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
         let energy0 = energy(model, 0.0, q0, v0, p0)

@@ -1,0 +1,256 @@
+//! Holonomic constraints (DESIGN §11, issue 25): the constrained Lobatto schemes (RATTLE at
+//! s = 2) against minimal coordinates, the constraints kept at every step, Noether's
+//! momentum of a symmetric constrained model, and the typed errors.
+//! `cargo test --workspace --release --test constraints`.
+
+use forced_vi::{Error, ForcedLagrangian, InitialState, Integrator, LinearPath, Scalar, Scheme};
+
+const M: f64 = 1.0;
+const G: f64 = 9.81;
+const L: f64 = 1.5;
+const C: f64 = 0.3;
+
+/// A pendulum in Cartesian coordinates with linear air drag: `L = ½m|v|² − m g y`,
+/// `F = −c v`, `g(q) = (x² + y² − l²)/2`.
+struct CartesianPendulum;
+
+impl ForcedLagrangian<2> for CartesianPendulum {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] + v[1] * v[1]) * (0.5 * M) - q[1] * (M * G)
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+        [v[0] * -C, v[1] * -C]
+    }
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn constraints<D: Scalar>(&self, _t: D, q: &[D; 2], g: &mut [D]) {
+        g[0] = (q[0] * q[0] + q[1] * q[1] - L * L) * 0.5;
+    }
+}
+
+/// The same pendulum in its angle from the downward vertical: `L = ½ m l² θ̇² + m g l cos θ`,
+/// `F = −c l² θ̇`.
+struct AnglePendulum;
+
+impl ForcedLagrangian<1> for AnglePendulum {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        v[0] * v[0] * (0.5 * M * L * L) + q[0].cos() * (M * G * L)
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [v[0] * (-C * L * L)]
+    }
+}
+
+const THETA0: f64 = 1.2;
+const OMEGA0: f64 = 0.4;
+const T: f64 = 2.0;
+
+fn cartesian_start() -> InitialState<2> {
+    let (s, c) = THETA0.sin_cos();
+    InitialState::from_velocity([L * s, -L * c], [L * c * OMEGA0, L * s * OMEGA0])
+}
+
+/// The Cartesian state `(x, y, p_x, p_y)` at `T` from the angle form, lobatto5 at h = 1e-3
+/// (its error is below 1e-14 here).
+fn reference() -> [f64; 4] {
+    let end = Integrator::new(&AnglePendulum, Scheme::lobatto(5).expect("scheme"), 1e-3)
+        .expect("integrator")
+        .final_state(InitialState::from_velocity([THETA0], [OMEGA0]), T)
+        .expect("reference run");
+    let (th, w) = (end.q[0], end.v[0]);
+    let (s, c) = th.sin_cos();
+    [L * s, -L * c, M * L * c * w, M * L * s * w]
+}
+
+/// Least-squares slope of log err against log h.
+fn slope(pts: &[(f64, f64)]) -> f64 {
+    let n = pts.len() as f64;
+    let (sx, sy) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (h, e)| (a + h.ln(), b + e.ln()));
+    let (mx, my) = (sx / n, sy / n);
+    let (num, den) = pts.iter().fold((0.0, 0.0), |(a, b), (h, e)| {
+        (a + (h.ln() - mx) * (e.ln() - my), b + (h.ln() - mx).powi(2))
+    });
+    num / den
+}
+
+#[test]
+fn constraint_cartesian_pendulum_converges_to_the_angle_form() {
+    let r = reference();
+    for s in 2..=5 {
+        let order = (2 * s - 2) as f64;
+        let mut pts_q = Vec::new();
+        let mut pts_p = Vec::new();
+        // Larger steps for the higher orders, which reach round-off sooner.
+        let h0 = [0.1, 0.1, 0.2, 0.4][s - 2];
+        for k in 0..4 {
+            let h = h0 / 2f64.powi(k);
+            let end = Integrator::new(&CartesianPendulum, Scheme::lobatto(s).expect("s"), h)
+                .expect("integrator")
+                .final_state(cartesian_start(), T)
+                .expect("constrained run");
+            let eq = (end.q[0] - r[0]).abs().max((end.q[1] - r[1]).abs());
+            let ep = (end.p[0] - r[2]).abs().max((end.p[1] - r[3]).abs());
+            // Points above the round-off floor only.
+            if eq > 1e-12 {
+                pts_q.push((h, eq));
+            }
+            if ep > 1e-12 {
+                pts_p.push((h, ep));
+            }
+        }
+        let (oq, op) = (slope(&pts_q), slope(&pts_p));
+        eprintln!(
+            "lobatto{s}: order {oq:.2} in q, {op:.2} in p ({} / {} points)",
+            pts_q.len(),
+            pts_p.len()
+        );
+        assert!(
+            pts_q.len() >= 2 && pts_p.len() >= 2,
+            "lobatto{s}: too few points"
+        );
+        assert!((oq - order).abs() < 0.3, "lobatto{s}: order {oq:.2} in q");
+        assert!((op - order).abs() < 0.3, "lobatto{s}: order {op:.2} in p");
+    }
+}
+
+#[test]
+fn constraint_residuals_stay_at_round_off() {
+    for s in [2, 3, 5] {
+        let integ = Integrator::new(&CartesianPendulum, Scheme::lobatto(s).expect("s"), 0.01)
+            .expect("integrator");
+        let mut worst = (0.0f64, 0.0f64);
+        integ
+            .for_each_step(cartesian_start(), 50.0, |r| {
+                let g = 0.5 * (r.q[0] * r.q[0] + r.q[1] * r.q[1] - L * L);
+                let gv = r.q[0] * r.v[0] + r.q[1] * r.v[1];
+                worst = (worst.0.max(g.abs()), worst.1.max(gv.abs()));
+            })
+            .expect("run");
+        eprintln!(
+            "lobatto{s}: |g| ≤ {:.1e}, |G v| ≤ {:.1e} over 5000 steps",
+            worst.0, worst.1
+        );
+        assert!(worst.0 < 1e-12 * L * L, "lobatto{s}: |g| = {:.1e}", worst.0);
+        assert!(
+            worst.1 < 1e-12 * L * L,
+            "lobatto{s}: |G v| = {:.1e}",
+            worst.1
+        );
+    }
+}
+
+/// A spherical pendulum, unforced: `L = ½m|v|² − m g z`, `g(q) = (|q|² − l²)/2`; the
+/// rotations about the vertical are a symmetry, so `L_z = m (x ẏ − y ẋ)` is conserved.
+struct SphericalPendulum {
+    drag: f64,
+}
+
+impl ForcedLagrangian<3> for SphericalPendulum {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 3], v: &[D; 3]) -> D {
+        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) * (0.5 * M) - q[2] * (M * G)
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 3], v: &[D; 3]) -> [D; 3] {
+        [v[0] * -self.drag, v[1] * -self.drag, v[2] * -self.drag]
+    }
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn constraints<D: Scalar>(&self, _t: D, q: &[D; 3], g: &mut [D]) {
+        g[0] = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - L * L) * 0.5;
+    }
+}
+
+#[test]
+fn constraint_spherical_pendulum_keeps_its_vertical_momentum() {
+    // Off the constraints at first: `projected` makes the data consistent.
+    let init = InitialState::projected(
+        &SphericalPendulum { drag: 0.0 },
+        [1.0, 0.2, -1.0],
+        [0.1, 1.5, 0.3],
+    )
+    .expect("projection");
+    let lz =
+        |q: &nalgebra::SVector<f64, 3>, p: &nalgebra::SVector<f64, 3>| q[0] * p[1] - q[1] * p[0];
+    for (drag, bound) in [(0.0, 1e-12), (0.2, f64::INFINITY)] {
+        let model = SphericalPendulum { drag };
+        let run = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
+            .expect("integrator")
+            .run(init, 20.0)
+            .expect("run");
+        let first = lz(&run.records[0].q, &run.records[0].p);
+        let drift = run
+            .records
+            .iter()
+            .map(|r| (lz(&r.q, &r.p) - first).abs())
+            .fold(0.0f64, f64::max);
+        let last = run.records.last().expect("records");
+        eprintln!(
+            "drag {drag}: L_z drift {drift:.1e} (L_z = {first:.3}), energy balance {:.1e}",
+            last.energy_balance
+        );
+        if drag == 0.0 {
+            assert!(
+                drift < bound * first.abs().max(1.0),
+                "L_z drifts by {drift:.1e}"
+            );
+        } else {
+            // With drag L_z decays: the check can fail.
+            assert!(lz(&last.q, &last.p).abs() < 0.1 * first.abs());
+        }
+        // The constraint forces do no work: the ledger balances.
+        assert!(
+            last.energy_balance.abs() < 1e-4,
+            "balance {:.1e}",
+            last.energy_balance
+        );
+    }
+}
+
+#[test]
+fn constraint_errors_are_typed() {
+    let model = CartesianPendulum;
+    let integ = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01).expect("integrator");
+    // Off the circle, and a velocity across it.
+    let off = integ.final_state(InitialState::from_velocity([L, 0.1], [0.0, 0.0]), 1.0);
+    assert!(matches!(
+        off.map_err(|f| f.error),
+        Err(Error::InconsistentInitialState {
+            what: "position",
+            ..
+        })
+    ));
+    let across = integ.final_state(InitialState::from_velocity([L, 0.0], [1.0, 0.0]), 1.0);
+    assert!(matches!(
+        across.map_err(|f| f.error),
+        Err(Error::InconsistentInitialState {
+            what: "velocity",
+            ..
+        })
+    ));
+    // A scheme without multipliers at its control points, the sparse backend, tolerances.
+    let mid = Integrator::new(&model, Scheme::midpoint(), 0.01).expect("integrator");
+    assert!(matches!(
+        mid.final_state(cartesian_start(), 1.0).map_err(|f| f.error),
+        Err(Error::UnsupportedConstraints { .. })
+    ));
+    let sparse = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
+        .expect("integrator")
+        .linear_path(LinearPath::Sparse);
+    assert!(matches!(
+        sparse
+            .final_state(cartesian_start(), 1.0)
+            .map_err(|f| f.error),
+        Err(Error::UnsupportedConstraints { .. })
+    ));
+    let adaptive = Integrator::adaptive(&model, Scheme::lobatto(3).expect("s"), 1e-6, 1e-6)
+        .expect("integrator");
+    assert!(matches!(
+        adaptive
+            .final_state(cartesian_start(), 1.0)
+            .map_err(|f| f.error),
+        Err(Error::UnsupportedConstraints { .. })
+    ));
+}
