@@ -245,6 +245,19 @@ fn constraint_errors_are_typed() {
             .map_err(|f| f.error),
         Err(Error::UnsupportedConstraints { .. })
     ));
+    // Derivatives do not carry the multipliers yet: refused, not wrong.
+    assert!(matches!(
+        integ
+            .sensitivities(cartesian_start(), 1.0)
+            .map_err(|f| f.error),
+        Err(Error::UnsupportedConstraints { .. })
+    ));
+    assert!(matches!(
+        integ
+            .adjoint_gradient(cartesian_start(), 1.0, |e| (e.q, e.v))
+            .map_err(|f| f.error),
+        Err(Error::UnsupportedConstraints { .. })
+    ));
     let adaptive = Integrator::adaptive(&model, Scheme::lobatto(3).expect("s"), 1e-6, 1e-6)
         .expect("integrator");
     assert!(matches!(
@@ -253,4 +266,156 @@ fn constraint_errors_are_typed() {
             .map_err(|f| f.error),
         Err(Error::UnsupportedConstraints { .. })
     ));
+}
+
+/// The Cartesian pendulum written with the attribute.
+#[forced_vi::forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * m * (x_dot * x_dot + y_dot * y_dot) - m * g * y,
+    force(x = -c * x_dot, y = -c * y_dot),
+    constraints(0.5 * (x * x + y * y - l * l)),
+)]
+struct MacroPendulum {
+    m: f64,
+    g: f64,
+    l: f64,
+    c: f64,
+}
+
+#[test]
+fn constraint_macro_model_equals_the_hand_written_one() {
+    let model = MacroPendulum {
+        m: M,
+        g: G,
+        l: L,
+        c: C,
+    };
+    assert_eq!(model.constraint_count(), 1);
+    let run = |end: forced_vi::FinalState<2>| (end.q, end.p);
+    let a = run(
+        Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
+            .expect("integrator")
+            .final_state(cartesian_start(), T)
+            .expect("macro model"),
+    );
+    let b = run(
+        Integrator::new(&CartesianPendulum, Scheme::lobatto(3).expect("s"), 0.01)
+            .expect("integrator")
+            .final_state(cartesian_start(), T)
+            .expect("hand-written model"),
+    );
+    assert!((a.0 - b.0).amax() < 1e-13 && (a.1 - b.1).amax() < 1e-13);
+}
+
+/// A double pendulum in Cartesian coordinates (two rods, two constraints) with the joint
+/// friction of `DoublePendulumFriction`: torques `−c θ̇₁`, `−c θ̇₂` on the absolute angles,
+/// as Cartesian forces `F = −c Σ_i θ̇_i ∇θ_i`.
+#[forced_vi::forced_lagrangian(
+    coordinates(x1, y1, x2, y2),
+    lagrangian = 0.5 * m1 * (x1_dot * x1_dot + y1_dot * y1_dot)
+        + 0.5 * m2 * (x2_dot * x2_dot + y2_dot * y2_dot)
+        - m1 * g * y1
+        - m2 * g * y2,
+    force(
+        x1 = {
+            let r1 = x1 * x1 + y1 * y1;
+            let dx = x2 - x1;
+            let dy = y2 - y1;
+            let r2 = dx * dx + dy * dy;
+            let w1 = (x1 * y1_dot - y1 * x1_dot) / r1;
+            let w2 = (dx * (y2_dot - y1_dot) - dy * (x2_dot - x1_dot)) / r2;
+            -c * w1 * (-y1) / r1 - c * w2 * dy / r2
+        },
+        y1 = {
+            let r1 = x1 * x1 + y1 * y1;
+            let dx = x2 - x1;
+            let dy = y2 - y1;
+            let r2 = dx * dx + dy * dy;
+            let w1 = (x1 * y1_dot - y1 * x1_dot) / r1;
+            let w2 = (dx * (y2_dot - y1_dot) - dy * (x2_dot - x1_dot)) / r2;
+            -c * w1 * x1 / r1 + c * w2 * dx / r2
+        },
+        x2 = {
+            let dx = x2 - x1;
+            let dy = y2 - y1;
+            let r2 = dx * dx + dy * dy;
+            let w2 = (dx * (y2_dot - y1_dot) - dy * (x2_dot - x1_dot)) / r2;
+            c * w2 * dy / r2
+        },
+        y2 = {
+            let dx = x2 - x1;
+            let dy = y2 - y1;
+            let r2 = dx * dx + dy * dy;
+            let w2 = (dx * (y2_dot - y1_dot) - dy * (x2_dot - x1_dot)) / r2;
+            -c * w2 * dx / r2
+        },
+    ),
+    constraints(
+        0.5 * (x1 * x1 + y1 * y1 - l1 * l1),
+        0.5 * ((x2 - x1) * (x2 - x1) + (y2 - y1) * (y2 - y1) - l2 * l2),
+    ),
+)]
+struct CartesianDoublePendulum {
+    m1: f64,
+    m2: f64,
+    l1: f64,
+    l2: f64,
+    g: f64,
+    c: f64,
+}
+
+#[test]
+fn constraint_double_pendulum_with_joint_friction_matches_the_angle_form() {
+    use forced_vi_models::models::DoublePendulumFriction;
+    let d = DoublePendulumFriction::DEFAULT;
+    let model = CartesianDoublePendulum {
+        m1: d.m1,
+        m2: d.m2,
+        l1: d.l1,
+        l2: d.l2,
+        g: d.g,
+        c: d.c,
+    };
+    let (th, w) = ([1.0, 0.5], [0.0, 0.3]);
+    let cart = |th: [f64; 2], w: [f64; 2]| {
+        let (s1, c1) = th[0].sin_cos();
+        let (s2, c2) = th[1].sin_cos();
+        let q = [
+            d.l1 * s1,
+            -d.l1 * c1,
+            d.l1 * s1 + d.l2 * s2,
+            -d.l1 * c1 - d.l2 * c2,
+        ];
+        let v = [
+            d.l1 * c1 * w[0],
+            d.l1 * s1 * w[0],
+            d.l1 * c1 * w[0] + d.l2 * c2 * w[1],
+            d.l1 * s1 * w[0] + d.l2 * s2 * w[1],
+        ];
+        (q, v)
+    };
+    let (q0, v0) = cart(th, w);
+    let t_final = 3.0;
+    let angle = Integrator::new(&d, Scheme::lobatto(5).expect("s"), 1e-3)
+        .expect("integrator")
+        .final_state(InitialState::from_velocity(th, w), t_final)
+        .expect("angle form");
+    let (q_ref, v_ref) = cart([angle.q[0], angle.q[1]], [angle.v[0], angle.v[1]]);
+    let mut last = f64::INFINITY;
+    for (s, h) in [(3, 0.01), (4, 0.01), (5, 0.02)] {
+        let end = Integrator::new(&model, Scheme::lobatto(s).expect("s"), h)
+            .expect("integrator")
+            .final_state(InitialState::from_velocity(q0, v0), t_final)
+            .expect("Cartesian form");
+        let eq = (0..4)
+            .map(|a| (end.q[a] - q_ref[a]).abs())
+            .fold(0.0, f64::max);
+        let ev = (0..4)
+            .map(|a| (end.v[a] - v_ref[a]).abs())
+            .fold(0.0, f64::max);
+        eprintln!("lobatto{s} h = {h}: |q − q_ref| = {eq:.1e}, |v − v_ref| = {ev:.1e}");
+        assert!(eq < 1e-6 && ev < 1e-5, "lobatto{s}: {eq:.1e} {ev:.1e}");
+        last = eq;
+    }
+    assert!(last < 1e-9, "{last:.1e}");
 }

@@ -6,6 +6,7 @@
 //!     coordinates(x, y),                  // or coordinates(q: [f64; 8]) / [f64; N]
 //!     lagrangian = <expr>,
 //!     force(x = <expr>, y = <expr>),      // optional; q[i] = <expr> or q = [<expr>, …]
+//!     constraints(<expr>, <expr>),        // optional: holonomic g(t, q) = 0
 //! )]
 //! struct Model { /* f64 parameters */ }
 //! ```
@@ -29,6 +30,9 @@ pub struct Model {
     pub lagrangian: Option<(Ident, Expr)>,
     /// The optional `force(...)` argument.
     pub force: Option<Force>,
+    /// The optional `constraints(...)` argument: its keyword and the expressions `g_k` that
+    /// must vanish.
+    pub constraints: Option<(Ident, Vec<Expr>)>,
 }
 
 /// A named field of the struct: a parameter of the model.
@@ -115,6 +119,7 @@ pub fn parse(cx: &Ctxt, args: TokenStream, item: syn::Item) -> Result<Model, Box
         coordinates: None,
         lagrangian: None,
         force: None,
+        constraints: None,
     };
     let mut seen = Vec::new();
     for chunk in split_top_level_commas(args) {
@@ -185,7 +190,7 @@ fn parse_argument(cx: &Ctxt, model: &mut Model, chunk: TokenStream) {
         other => {
             cx.error_spanned_by(
                 other,
-                "expected `coordinates(...)`, `lagrangian = ...` or `force(...)`",
+                "expected `coordinates(...)`, `lagrangian = ...`, `force(...)` or `constraints(...)`",
             );
             return;
         }
@@ -238,10 +243,24 @@ fn parse_argument(cx: &Ctxt, model: &mut Model, chunk: TokenStream) {
             }
             Err(e) => cx.syn_error(e),
         },
+        "constraints" => match parenthesised(&key, rest)
+            .and_then(|body| Punctuated::<Expr, Token![,]>::parse_terminated.parse2(body))
+        {
+            Ok(list) => {
+                if model.constraints.is_some() {
+                    duplicate("constraints");
+                } else if list.is_empty() {
+                    cx.error_spanned_by(&key, "`constraints()` is empty: list the expressions that must vanish, or leave the argument out");
+                } else {
+                    model.constraints = Some((key, list.into_iter().collect()));
+                }
+            }
+            Err(e) => cx.syn_error(e),
+        },
         other => cx.error_spanned_by(
             &key,
             format!(
-                "unknown argument `{other}`: expected `coordinates(...)`, `lagrangian = ...` or `force(...)`"
+                "unknown argument `{other}`: expected `coordinates(...)`, `lagrangian = ...`, `force(...)` or `constraints(...)`"
             ),
         ),
     }

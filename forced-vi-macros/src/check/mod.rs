@@ -47,6 +47,8 @@ pub struct Checked<'a> {
     pub checked_index: bool,
     /// The model as local terms, if it splits (DESIGN §9).
     pub split: Option<crate::split::Split>,
+    /// The holonomic constraints `g_k(t, q)`, lowered (DESIGN §11).
+    pub constraints: Vec<Lowered>,
 }
 
 /// The largest number of coordinates of a model with a literal length (a larger one is
@@ -120,6 +122,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
     let l_checked = lower_l.checked_index.get();
     check_lagrangian_uses_velocity(cx, &env, lagrangian, &lowered);
     let force_fns = model.force.as_ref().map(|f| check_force(cx, &env, f));
+    let constraints = check_constraints(cx, &env, model, &n);
     let n = n?;
     if cx.has_errors() {
         return None;
@@ -139,6 +142,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         || force
             .as_ref()
             .is_some_and(|f| f.fns.iter().any(|func| func.lowered.names.contains(TIME)));
+    let uses_time = uses_time || constraints.iter().any(|c| c.names.contains(TIME));
     let checked_index = l_checked
         || force
             .as_ref()
@@ -156,12 +160,71 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         uses_time,
         checked_index,
         split: None,
+        constraints,
     };
     if !params_dual {
         checked.split = crate::split::split(&checked);
     }
     check_dense_size(cx, &checked);
     Some(checked)
+}
+
+/// The `constraints(...)` argument: each expression lowered, reading no velocity (only
+/// holonomic constraints are supported), fewer constraints than coordinates.
+fn check_constraints(cx: &Ctxt, env: &Env, model: &Model, n: &Option<Len>) -> Vec<Lowered> {
+    let Some((key, exprs)) = model.constraints.as_ref() else {
+        return Vec::new();
+    };
+    if let Some(n) = n.as_ref().and_then(|n| n.literal()) {
+        if exprs.len() >= n {
+            cx.error_spanned_by(
+                key,
+                format!(
+                    "{} constraints for {n} coordinates: no coordinate is left free; a constrained model needs fewer constraints than coordinates",
+                    exprs.len()
+                ),
+            );
+        }
+    }
+    let velocities: Vec<String> = env.groups.iter().map(|g| g.velocity.to_string()).collect();
+    let mut out = Vec::new();
+    for (k, e) in exprs.iter().enumerate() {
+        let mut lw = Lowerer::new(cx, env, format!("constraint {}", k + 1));
+        let l = lw.expr(e);
+        if let Some(v) = velocities.iter().find(|v| l.names.contains(*v)) {
+            // Point at the velocity itself where it is written.
+            let at = velocity_token(e, v);
+            let msg = format!(
+                "constraint {} reads the velocity `{v}`: only holonomic constraints g(t, q) = 0 are supported (nonholonomic, velocity-dependent constraints are not)",
+                k + 1
+            );
+            match at {
+                Some(tok) => cx.error_spanned_by(tok, msg),
+                None => cx.error_spanned_by(e, msg),
+            }
+        }
+        out.push(l);
+    }
+    out
+}
+
+/// The first token of `e` named `name`.
+fn velocity_token(e: &Expr, name: &str) -> Option<proc_macro2::Ident> {
+    fn find(ts: proc_macro2::TokenStream, name: &str) -> Option<proc_macro2::Ident> {
+        for t in ts {
+            match t {
+                proc_macro2::TokenTree::Ident(i) if i == name => return Some(i),
+                proc_macro2::TokenTree::Group(g) => {
+                    if let Some(i) = find(g.stream(), name) {
+                        return Some(i);
+                    }
+                }
+                _ => {}
+            }
+        }
+        None
+    }
+    find(quote::ToTokens::to_token_stream(e), name)
 }
 
 /// Splits `L` into terms: the sum of the polynomials (with `symbolic`, for a literal number

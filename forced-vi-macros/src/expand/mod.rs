@@ -126,10 +126,12 @@ pub fn generate(c: &Checked, theta: Option<&Checked>) -> TokenStream {
         Some(th) => Gen::new(th).parameter_items(&mut helpers),
         None => TokenStream::new(),
     };
+    let constraint_items = g.constraint_items();
     let items = quote! {
         #lagrangian
         #force_method
         #parameter_items
+        #constraint_items
     };
     let trait_impl = g.trait_impl(items, check_model, kernels_and_stack, split_items);
     let inherent_impl = g.inherent_impl(helpers);
@@ -387,6 +389,48 @@ impl<'c, 'm> Gen<'c, 'm> {
                 #l_body
             }
             #force
+        }
+    }
+
+    /// `constraint_count` and `constraints` for a model with `constraints(...)`
+    /// (DESIGN §11): each `g_k` written to its slot of `g`, with `t` and the coordinates
+    /// bound as for the Lagrangian.
+    fn constraint_items(&self) -> TokenStream {
+        let c = self.c;
+        if c.constraints.is_empty() {
+            return TokenStream::new();
+        }
+        let (n, d, scalar_bound) = (&c.n, &self.d, &self.scalar_bound);
+        let (dq, dv, dt) = (&self.dq, &self.dv, &self.dt);
+        let count = lit(c.constraints.len());
+        let slots = c.constraints.iter().enumerate().map(|(k, l)| {
+            let bind = self.bindings(&l.names);
+            let t_bind = if l.names.contains(TIME) {
+                let t = Ident::new(TIME, Span::call_site());
+                quote!(let #t: #d = #dt;)
+            } else {
+                TokenStream::new()
+            };
+            let body = lowered_dual(l);
+            let k = lit(k);
+            quote! {
+                if let ::core::option::Option::Some(__fvi_slot) = __fvi_g.get_mut(#k) {
+                    *__fvi_slot = { #t_bind #bind #body };
+                }
+            }
+        });
+        quote! {
+            fn constraint_count(&self) -> usize {
+                #count
+            }
+            #[allow(unused_braces, unused_parens, unused_variables)]
+            fn constraints<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], __fvi_g: &mut [#d]) {
+                // Velocities are refused in constraints; `__fvi_v` only keeps the bindings'
+                // shape.
+                let #dv: &[#d; #n] = #dq;
+                let _ = #dv;
+                #(#slots)*
+            }
         }
     }
 

@@ -14,6 +14,17 @@ use crate::trajectory::{
 use nalgebra::SVector;
 
 impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
+    /// The derivatives do not carry the multipliers of a constrained model yet: refused
+    /// rather than wrong.
+    fn refuse_constraints(&self) -> Result<(), RunFailure<N>> {
+        if self.model.constraint_count() > 0 {
+            return Err(RunFailure::new(Error::UnsupportedConstraints {
+                message: "sensitivities of constrained models are not supported yet",
+            }));
+        }
+        Ok(())
+    }
+
     /// Opens the run's stepper and hands it to `visit`; a run that cannot start is a
     /// failure with nothing computed.
     fn open<R>(
@@ -107,6 +118,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Sensitivities<N>, RunFailure<N>> {
+        self.refuse_constraints()?;
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
@@ -166,6 +178,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         t_final: f64,
         dloss: impl FnOnce(&FinalState<N>) -> (SVector<f64, N>, SVector<f64, N>),
     ) -> Result<AdjointGradient<N>, RunFailure<N>> {
+        self.refuse_constraints()?;
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.keep_tape();
