@@ -122,13 +122,23 @@ fn constraint_residuals_stay_at_round_off() {
         let integ = Integrator::new(&CartesianPendulum, Scheme::lobatto(s).expect("s"), 0.01)
             .expect("integrator");
         let mut worst = (0.0f64, 0.0f64);
+        let mut reported = 0.0f64;
+        let mut tension = f64::INFINITY;
         integ
             .for_each_step(cartesian_start(), 50.0, |r| {
                 let g = 0.5 * (r.q[0] * r.q[0] + r.q[1] * r.q[1] - L * L);
                 let gv = r.q[0] * r.v[0] + r.q[1] * r.v[1];
                 worst = (worst.0.max(g.abs()), worst.1.max(gv.abs()));
+                reported = reported.max(r.constraint_residual);
+                if r.step > 0 {
+                    // The rod pulls towards the pivot: the force points along −q.
+                    tension = tension
+                        .min(-(r.constraint_force[0] * r.q[0] + r.constraint_force[1] * r.q[1]));
+                }
             })
             .expect("run");
+        assert!(reported <= worst.0.max(worst.1) * 1.01 + 1e-300 && reported > 0.0);
+        assert!(tension > 0.0, "the rod pushes: {tension}");
         eprintln!(
             "lobatto{s}: |g| ≤ {:.1e}, |G v| ≤ {:.1e} over 5000 steps",
             worst.0, worst.1

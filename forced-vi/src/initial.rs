@@ -194,6 +194,25 @@ fn constraint_residuals<M: ForcedLagrangian<N>, const N: usize>(
     (g, gv, jac)
 }
 
+/// `max(|g(t, q)|, |G(q) v|)` of a constrained model (0 without constraints).
+pub(crate) fn constraint_residual<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    t: f64,
+    q: &[f64],
+    v: &[f64],
+) -> f64 {
+    let m = model.constraint_count();
+    if m == 0 {
+        return 0.0;
+    }
+    let mut g = DVector::zeros(m);
+    let mut jac = DMatrix::zeros(m, N);
+    let q = SVector::<f64, N>::from_column_slice(q);
+    crate::model::general::constraint_jacobian_at(model, t, &q, g.as_mut_slice(), &mut jac);
+    let gv = &jac * DVector::from_column_slice(v);
+    g.amax().max(gv.amax())
+}
+
 /// Checks that initial data lie on the constraints: `|g(q_0)| ≤ 10⁻¹⁰ (1 + |q_0|)` and
 /// `|G(q_0) v_0| ≤ 10⁻¹⁰ max(1, |G| |v_0|)` (max-norms), else
 /// [`Error::InconsistentInitialState`].

@@ -36,6 +36,12 @@ pub struct StepRecord<const N: usize> {
     /// [`crate::control`] in units of the tolerance (per step, not per unit step); 0 for the
     /// initial state and for fixed steps.
     pub error_estimate: f64,
+    /// A constrained model (DESIGN §11): the constraint force `Gᵀλ` averaged over the
+    /// step that ended here (its impulse over the step size); zero without constraints.
+    pub constraint_force: SVector<f64, N>,
+    /// A constrained model: `max(|g(t, q)|, |G(q) v|)` at this record (max-norms); zero
+    /// without constraints and in a lean run.
+    pub constraint_residual: f64,
 }
 
 /// Totals over a run.

@@ -55,6 +55,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let (s1, r) = (sch.stages() - 1, sch.quadrature_nodes());
         let lay = self.backend.layout();
         let (backend, st, dp) = (&self.backend, &mut self.state, &mut self.dp);
+        let cforce = &mut self.cforce;
         let z = backend.z();
         let mut fmax = 0.0f64;
         dp.fill(0.0);
@@ -67,6 +68,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         }
         if let Some(imp) = backend.constraint_impulse() {
             dp.iter_mut().zip(imp).for_each(|(d, i)| *d -= i);
+            cforce.iter_mut().zip(imp).for_each(|(f, i)| *f = -i / h);
         }
         for (a, &d) in dp.iter().enumerate() {
             st.q.add(a, z[lay.at(s1, a)]);

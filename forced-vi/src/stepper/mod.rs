@@ -171,6 +171,8 @@ pub struct Stepper<'a, M, const N: usize> {
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).
     tangent: Option<Box<tangent::Tangent>>,
+    /// A constrained model: the mean constraint force over the last step (DESIGN §11).
+    cforce: Vec<f64>,
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).
     tape: Option<Box<adjoint::Tape>>,
     /// The stack a step needs ([`step_stack_bytes`]).
@@ -238,6 +240,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             residual,
             substeps,
             error_estimate: self.estimate,
+            constraint_force: SVector::from_column_slice(&self.cforce),
+            constraint_residual: if diagnostics {
+                crate::initial::constraint_residual(self.model, self.t, &st.q.sum, &st.v)
+            } else {
+                0.0
+            },
         }
     }
 

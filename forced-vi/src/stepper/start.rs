@@ -101,6 +101,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             lean: false,
             tangent: None,
             tape: None,
+            cforce: vec![0.0; N],
             stack,
             stats: RunStats::default(),
             started: false,
