@@ -22,8 +22,9 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     /// The transposed step Jacobian and its factors, for adjoints (made on first use).
     adjoint: Option<(DMatrix<f64>, DenseLu)>,
     /// A constrained model: the momentum of the constraint forces over the last step,
-    /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11).
+    /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11), and the multipliers `λ_{s−1}` at its end.
     impulse: SVector<f64, N>,
+    mu: Vec<f64>,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
@@ -53,6 +54,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 gjac: vec![DMatrix::zeros(cons, N); s],
             },
             impulse: SVector::zeros(),
+            mu: vec![0.0; cons],
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
             rhs: DVector::zeros(0),
@@ -146,6 +148,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
             imp[a] += c * (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
         }
         self.impulse = imp;
+        self.mu.copy_from_slice(mu.as_slice());
         Ok(())
     }
 }
@@ -191,14 +194,25 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         prob.q0.as_mut_slice().copy_from_slice(q0);
         prob.p0.as_mut_slice().copy_from_slice(p0);
         self.newton.invalidate();
-        let report = self
-            .newton
-            .solve(prob, &mut self.z, scale)
-            .map_err(StepFailure::Newton)?;
-        if self.prob.cons > 0 {
-            self.project()?;
+        let solved = self.newton.solve(prob, &mut self.z, scale);
+        if self.prob.cons == 0 {
+            return solved.map_err(StepFailure::Newton);
         }
-        Ok(report)
+        match solved {
+            Ok(report) => {
+                self.project()?;
+                Ok(report)
+            }
+            // The one Newton iteration of the error estimate (`crate::control`) ends its
+            // step too, so that its momentum carries its constraint impulse.
+            Err(f @ NewtonFailure::MaxIterations { .. })
+                if self.newton.options().max_iterations == 1 =>
+            {
+                self.project()?;
+                Err(StepFailure::Newton(f))
+            }
+            Err(f) => Err(StepFailure::Newton(f)),
+        }
     }
 
     #[inline(always)]
@@ -338,6 +352,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     fn constraint_impulse(&self) -> Option<&[f64]> {
         (self.prob.cons > 0).then_some(self.impulse.as_slice())
+    }
+
+    fn end_multipliers(&self) -> &[f64] {
+        &self.mu
     }
 
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {

@@ -153,6 +153,9 @@ pub(crate) trait StepBackend {
     /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
     /// over the last solved step (DESIGN §11); `None` without constraints.
     fn constraint_impulse(&self) -> Option<&[f64]>;
+    /// A constrained model: the multipliers `λ_{s−1}` at the end of the last solved step
+    /// (those of its earlier control points follow the increments in [`Self::z`]).
+    fn end_multipliers(&self) -> &[f64];
     /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
     /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
@@ -301,6 +304,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn constraint_impulse(&self) -> Option<&[f64]> {
         forward!(self, b => b.constraint_impulse())
+    }
+    fn end_multipliers(&self) -> &[f64] {
+        forward!(self, b => b.end_multipliers())
     }
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         forward!(self, b => b.step_data())

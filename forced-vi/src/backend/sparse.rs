@@ -212,6 +212,10 @@ impl StepBackend for SparseBackend<'_> {
         None
     }
 
+    fn end_multipliers(&self) -> &[f64] {
+        &[]
+    }
+
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         let p = &self.prob;
         (p.h, p.t0, &p.q0, &p.p0)

@@ -245,12 +245,6 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
         let newton = self.options.newton;
-        if self.tolerance.is_some() && self.model.constraint_count() > 0 {
-            return Err(Error::UnsupportedConstraints {
-                message:
-                    "adaptive steps on constrained models are not supported yet; use fixed steps",
-            });
-        }
         let backend = self.backend(&init, &self.scheme, newton)?;
         // The error estimate's one Newton iteration (see `crate::control`).
         let reference = match (&self.tolerance, &self.reference) {

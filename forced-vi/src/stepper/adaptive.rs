@@ -99,6 +99,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
             }
         }
+        // A constrained model: the multipliers, interpolated in time from the step's
+        // (`λ_0 … λ_{s−2}` in `z`, `λ_{s−1}` at its end) to the reference's control points.
+        let cons = self.model.constraint_count();
+        if cons > 0 {
+            let mu = self.backend.end_multipliers();
+            let s = s1 + 1;
+            for j in 0..r1 {
+                let row = &self.lift_lambda[j * s..(j + 1) * s];
+                for k in 0..cons {
+                    let at = |m: usize| {
+                        if m + 1 < s {
+                            z[s1 * N + m * cons + k]
+                        } else {
+                            mu.get(k).copied().unwrap_or(0.0)
+                        }
+                    };
+                    zr[r1 * N + j * cons + k] = (0..s).map(|m| row[m] * at(m)).sum();
+                }
+            }
+        }
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
@@ -133,6 +153,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 let t = h * bi * reference.node_fq(i)[a];
                 d -= t;
                 size += t.abs();
+            }
+            if let Some(imp) = reference.constraint_impulse() {
+                d += imp[a];
+                size += imp[a].abs();
             }
             *e = (d.abs() - noise * size).max(0.0);
         }

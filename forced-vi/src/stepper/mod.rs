@@ -171,6 +171,9 @@ pub struct Stepper<'a, M, const N: usize> {
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).
     tangent: Option<Box<tangent::Tangent>>,
+    /// A constrained model: the step's multipliers interpolated to the reference's control
+    /// points `0 … r − 2` (row `j`: the Lagrange basis of the step's control points there).
+    lift_lambda: Vec<f64>,
     /// A constrained model: the mean constraint force over the last step (DESIGN §11).
     cforce: Vec<f64>,
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).

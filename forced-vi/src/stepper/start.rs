@@ -59,6 +59,16 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 lift.extend((1..=s1).map(|m| scheme.basis_at(dj, m)));
             }
         }
+        // The step's multipliers (at all its control points) at the reference's.
+        let mut lift_lambda = Vec::new();
+        if let Some(r) = &reference {
+            if model.constraint_count() > 0 {
+                let d = r.scheme().d();
+                for &dj in &d[..d.len() - 1] {
+                    lift_lambda.extend((0..scheme.stages()).map(|m| scheme.basis_at(dj, m)));
+                }
+            }
+        }
         let n_steps = match tolerance {
             // Adaptive: the count is not known; the cap is checked as the run goes.
             Some(_) => step_count(t_final, h, usize::MAX)?,
@@ -79,6 +89,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             backend,
             reference,
             lift,
+            lift_lambda,
             options,
             h,
             t_final,
