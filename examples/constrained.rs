@@ -169,8 +169,8 @@ fn main() -> Result<(), forced_vi::Error> {
                     mean[0] += 0.5 * w * (-tension * sn);
                     mean[1] += 0.5 * w * (tension * cs);
                 }
-                for a in 0..2 {
-                    worst = worst.max((r.constraint_force[a] - mean[a]).abs());
+                for (f, m) in r.constraint_force.iter().zip(mean) {
+                    worst = worst.max((f - m).abs());
                 }
             }
             pts.push((h, worst));
