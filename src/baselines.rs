@@ -215,6 +215,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> OdeSystem<'m, M, N> {
         let q = SVector::<f64, N>::from_fn(|i, _| y[i]);
         let v = SVector::<f64, N>::from_fn(|i, _| y[N + i]);
         let accel = match &self.mass_inverse {
+            _ if self.model.constraint_count() > 0 => self.constrained_accel(t, &q, &v),
             Some(inv) if !M::STRUCTURE.uses_time => Some(inv * self.model.node_gradient(&q, &v).fq),
             _ => {
                 let j = self.model.node_jacobian_at(t, &q, &v);
@@ -229,6 +230,48 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> OdeSystem<'m, M, N> {
             let f = SVector::from(self.model.force_at::<f64>(t, &q.into(), &v.into()));
             dy[2 * N] = f.dot(&v) - self.model.lagrangian_dt(t, &q, &v);
         }
+    }
+
+    /// The accelerations of a constrained model in index-1 form (DESIGN §11): `E a + Gᵀλ =
+    /// L_q + F − C v − ∂L_v/∂t` with `G a = −d²g/dt²|_{a = 0}`, the second derivative of
+    /// `g(t + ε, q + ε v)` in `ε` (one second-order dual number). The constraints then hold
+    /// only to the solver's tolerance, drifting slowly (no projection).
+    fn constrained_accel(
+        &self,
+        t: f64,
+        q: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+    ) -> Option<SVector<f64, N>> {
+        use num_dual::Dual2_64;
+        let m = self.model.constraint_count();
+        let j = self.model.node_jacobian_at(t, q, v);
+        let lv_t = lagrangian_v_dt(self.model, t, q, v);
+        let mut g = vec![0.0; m];
+        let mut gq = nalgebra::DMatrix::zeros(m, N);
+        forced_vi::model::general::constraint_jacobian_at(self.model, t, q, &mut g, &mut gq);
+        let qd: [Dual2_64; N] = std::array::from_fn(|a| Dual2_64::new(q[a], v[a], 0.0));
+        let mut w = vec![Dual2_64::from(0.0); m];
+        self.model.constraints(Dual2_64::new(t, 1.0, 0.0), &qd, &mut w);
+        let n = N + m;
+        let mut k = nalgebra::DMatrix::<f64>::zeros(n, n);
+        let mut rhs = nalgebra::DVector::<f64>::zeros(n);
+        let f = j.grad.fq - j.c * v - lv_t;
+        for a in 0..N {
+            rhs[a] = f[a];
+            for b in 0..N {
+                k[(a, b)] = j.e[(a, b)];
+            }
+            for r in 0..m {
+                k[(a, N + r)] = gq[(r, a)];
+                k[(N + r, a)] = gq[(r, a)];
+            }
+        }
+        for r in 0..m {
+            // `v2` of num-dual's second-order dual is the second derivative itself.
+            rhs[N + r] = -w[r].v2;
+        }
+        let sol = k.lu().solve(&rhs)?;
+        Some(SVector::from_fn(|a, _| sol[a]))
     }
 
     /// `out = J(t, y) w` by a forward difference of [`rhs`](Self::rhs).

@@ -17,8 +17,8 @@ use nalgebra::DMatrix;
 
 use crate::baselines::{self, Baseline, BaselineError, OdeSystem};
 use crate::models::{
-    CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing, KapitzaPendulum,
-    KeplerDrag,
+    CartesianPendulum, CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing,
+    KapitzaPendulum, KeplerDrag,
 };
 use crate::reference::Reference;
 
@@ -532,6 +532,11 @@ pub fn all() -> Result<Vec<Box<dyn Scene>>, SceneError> {
             "driven_duffing",
             DrivenDuffing::CHAOTIC,
             "Driven Duffing oscillator in its chaotic regime, (δ, α, β, γ, ω) = (0.3, −1, 1, 0.5, 1.2), 5 periods: F(t, x, ẋ)"
+        ),
+        scene!(
+            "cartesian_pendulum",
+            CartesianPendulum::DEFAULT,
+            "Pendulum in Cartesian coordinates (x, y) held on its circle by the constraint x² + y² = l², air drag c = 0.3: holonomic constraints (DESIGN §11)"
         ),
         scene!(
             "kapitza_pendulum",

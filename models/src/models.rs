@@ -412,3 +412,34 @@ impl ForcedLagrangian<1> for KapitzaPendulum {
         [-v[0] * self.c]
     }
 }
+
+/// A pendulum in Cartesian coordinates with linear air drag, held on its circle by a
+/// holonomic constraint (DESIGN §11): `L = ½m|v|² − m g y`, `F = −c v`,
+/// `g(q) = (x² + y² − l²)/2`.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * m * (x_dot * x_dot + y_dot * y_dot) - m * g * y,
+    force(x = -c * x_dot, y = -c * y_dot),
+    constraints(0.5 * (x * x + y * y - l * l)),
+)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CartesianPendulum {
+    /// Mass.
+    pub m: f64,
+    /// Gravity.
+    pub g: f64,
+    /// Rod length.
+    pub l: f64,
+    /// Drag coefficient.
+    pub c: f64,
+}
+
+impl CartesianPendulum {
+    /// `m = 1`, `g = 9.81`, `l = 1.5`, `c = 0.3`.
+    pub const DEFAULT: CartesianPendulum = CartesianPendulum {
+        m: 1.0,
+        g: 9.81,
+        l: 1.5,
+        c: 0.3,
+    };
+}
