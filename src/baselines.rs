@@ -251,7 +251,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> OdeSystem<'m, M, N> {
         forced_vi::model::general::constraint_jacobian_at(self.model, t, q, &mut g, &mut gq);
         let qd: [Dual2_64; N] = std::array::from_fn(|a| Dual2_64::new(q[a], v[a], 0.0));
         let mut w = vec![Dual2_64::from(0.0); m];
-        self.model.constraints(Dual2_64::new(t, 1.0, 0.0), &qd, &mut w);
+        self.model
+            .constraints(Dual2_64::new(t, 1.0, 0.0), &qd, &mut w);
         let n = N + m;
         let mut k = nalgebra::DMatrix::<f64>::zeros(n, n);
         let mut rhs = nalgebra::DVector::<f64>::zeros(n);
