@@ -177,7 +177,8 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     })
 }
 
-/// The tolerance of [`check_constraints`], relative to the size of the data.
+/// The tolerance of the initial-data check of a constrained model (`g(q_0) = 0`,
+/// `G(q_0) v_0 = 0`), relative to the size of the data.
 pub const CONSTRAINT_TOL: f64 = 1e-10;
 
 /// `g(q_0)` and `G(q_0) v_0` of a constrained model (DESIGN §11): `(g, G v)`.

@@ -164,7 +164,7 @@ pub struct AdjointGradient<const N: usize> {
     /// `∂ℓ/∂(q_0, v_0)`, `2N` entries: positions, then velocities.
     pub wrt_initial: DVector<f64>,
     /// `∂ℓ/∂θ`, one entry per parameter
-    /// ([`ForcedLagrangian::parameter_names`](crate::ForcedLagrangian::parameter_names)).
+    /// ([`ForcedLagrangian::parameter_names`]).
     pub wrt_parameters: DVector<f64>,
     /// The memory the forward run kept for the backward pass, in bytes (each step's start,
     /// size and solution).
