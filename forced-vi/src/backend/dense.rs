@@ -23,7 +23,7 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     adjoint: Option<(DMatrix<f64>, DenseLu)>,
     /// A constrained model: the momentum of the constraint forces over the last step,
     /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11), and the multipliers `λ_{s−1}` at its end.
-    impulse: SVector<f64, N>,
+    impulse: Vec<f64>,
     mu: Vec<f64>,
 }
 
@@ -53,7 +53,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 gval: vec![0.0; cons],
                 gjac: vec![DMatrix::zeros(cons, N); s],
             },
-            impulse: SVector::zeros(),
+            impulse: Vec::new(),
             mu: vec![0.0; cons],
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
@@ -147,7 +147,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
         for a in 0..N {
             imp[a] += c * (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
         }
-        self.impulse = imp;
+        self.impulse.clear();
+        self.impulse.extend_from_slice(imp.as_slice());
         self.mu.copy_from_slice(mu.as_slice());
         Ok(())
     }
@@ -351,7 +352,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     }
 
     fn constraint_impulse(&self) -> Option<&[f64]> {
-        (self.prob.cons > 0).then_some(self.impulse.as_slice())
+        (self.prob.cons > 0).then_some(&self.impulse[..])
     }
 
     fn end_multipliers(&self) -> &[f64] {
