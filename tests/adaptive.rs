@@ -151,7 +151,10 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes() {
             // node's time (ε t) puts a noise of about ε t a Ω³ h into each step's momentum,
             // which smaller steps do not reduce; at tol = 1e-12 lobatto3 ends in
             // `StepSizeTooSmall` at t = 8 (measured), so the sweep stops at 1e-11 there.
-            let kapitza = scene.name() == "kapitza_pendulum";
+            // The constrained pendulum stops at 1e-11 too: at 1e-12 lobatto3 ends in
+            // `StepSizeTooSmall` at t = 0.12 (measured), where the estimate meets the
+            // round-off of the constraint's rows (ε |q|² with |q|² = 2.25).
+            let kapitza = matches!(scene.name(), "kapitza_pendulum" | "cartesian_pendulum");
             let floor = match (s, kapitza) {
                 (2, true) => 1e-6,
                 (2, false) => 1e-9,

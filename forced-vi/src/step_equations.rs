@@ -27,8 +27,9 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) base: DMatrix<f64>,
     pub(crate) base_h: f64,
     /// Holonomic constraints (DESIGN §11): their number `m`, and scratch for `g` and, per
-    /// control point, `G = ∂g/∂q` (`m × N`). The unknowns `λ_0 … λ_{s−2}` follow the
-    /// increments in `z`; the rows `g(x_j)/h`, `j = 1 … s − 1`, follow the gradient rows.
+    /// control point, `G = ∂g/∂q` (`m × N`). The unknowns `ŵ_j = h² λ_j`, `j = 0 … s − 2`,
+    /// follow the increments in `z`; the rows `g(x_j)`, `j = 1 … s − 1`, follow the
+    /// gradient rows.
     pub(crate) cons: usize,
     pub(crate) gval: Vec<f64>,
     pub(crate) gjac: Vec<DMatrix<f64>>,
@@ -150,9 +151,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     /// The constraint terms of the step equations (DESIGN §11, Lobatto schemes: control
     /// point `j` is quadrature node `j`): `−h b_j G(x_j)ᵀ λ_j` in the gradient rows and the
-    /// rows `g(x_j)/h`; with `jac`, their derivatives instead (`−h b_j G(x_j)ᵀ` in the `λ_j`
-    /// columns, `−h b_j Σ_r λ_{j,r} ∂²g_r` on the diagonal blocks, `G(x_j)/h` in the
-    /// constraint rows). The node positions must be those of `z`.
+    /// rows `g(x_j)`; with `jac`, their derivatives instead (`−h b_j G(x_j)ᵀ` in the `λ_j`
+    /// columns, `−h b_j Σ_r λ_{j,r} ∂²g_r` on the diagonal blocks, `G(x_j)` in the
+    /// constraint rows). The rows are `g` itself, not `g/h`: their round-off (`ε |q|²`)
+    /// then stays within the Newton's round-off floor at any step size.
     fn constraint_rows(
         &mut self,
         z: &DVector<f64>,
@@ -177,13 +179,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
             if !(self.gval.iter().all(|v| v.is_finite()) && gj.iter().all(|v| v.is_finite())) {
                 return Err(NewtonFailure::NonFinite);
             }
-            let hb = h * sch.b()[j];
+            // The unknowns are `ŵ_j = h² λ_j`, so that every block of the Jacobian is of
+            // order 1/h (a step of any size keeps it well scaled): `h b_j λ_j = (b_j/h) ŵ_j`.
+            let hb = sch.b()[j] / h;
             match jac.as_deref_mut() {
                 None => {
                     let rs = r.as_mut_slice();
                     if j >= 1 {
                         for (k, g) in self.gval.iter().enumerate() {
-                            rs[nz + (j - 1) * m + k] = g / h;
+                            rs[nz + (j - 1) * m + k] = *g;
                         }
                     }
                     if j + 1 < s {
@@ -219,7 +223,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
                     if j >= 1 {
                         for k in 0..m {
                             for a in 0..N {
-                                jm[(nz + (j - 1) * m + k, (j - 1) * N + a)] = gj[(k, a)] / h;
+                                jm[(nz + (j - 1) * m + k, (j - 1) * N + a)] = gj[(k, a)];
                             }
                         }
                     }

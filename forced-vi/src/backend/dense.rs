@@ -83,12 +83,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
         for j in 0..s - 1 {
             let lam = &zs[nz + j * m..nz + (j + 1) * m];
             let gj = &prob.gjac[j];
+            // `z` holds `ŵ_j = h² λ_j` (see `StepProblem`).
             for a in 0..N {
-                imp[a] += h * sch.b()[j] * (0..m).map(|k| gj[(k, a)] * lam[k]).sum::<f64>();
+                imp[a] += sch.b()[j] / h * (0..m).map(|k| gj[(k, a)] * lam[k]).sum::<f64>();
             }
         }
         ptil -= imp;
-        let c = h * sch.b()[s - 1];
         let g1 = &prob.gjac[s - 1];
         let (t1, q1) = (prob.t0 + h, prob.xs[s - 1]);
         let mut v = prob.vs[s - 1];
@@ -100,16 +100,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
             let nj = prob.model.node_jacobian_at(t1, &q1, &v);
             let mut size = (0.0f64, 0.0f64);
             for a in 0..N {
+                // `mu` is the impulse `h b_{s−1} μ`, so that the matrix is well scaled for
+                // any step size.
                 let gt_mu: f64 = (0..m).map(|k| g1[(k, a)] * mu[k]).sum();
-                rhs[a] = -(nj.grad.lv[a] + c * gt_mu - ptil[a]);
+                rhs[a] = -(nj.grad.lv[a] + gt_mu - ptil[a]);
                 size.0 = size
                     .0
-                    .max(nj.grad.lv[a].abs() + (c * gt_mu).abs() + ptil[a].abs());
+                    .max(nj.grad.lv[a].abs() + gt_mu.abs() + ptil[a].abs());
                 for b in 0..N {
                     kkt[(a, b)] = nj.e[(a, b)];
                 }
                 for k in 0..m {
-                    kkt[(a, N + k)] = c * g1[(k, a)];
+                    kkt[(a, N + k)] = g1[(k, a)];
                     kkt[(N + k, a)] = g1[(k, a)];
                 }
             }
@@ -145,11 +147,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
             }));
         }
         for a in 0..N {
-            imp[a] += c * (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
+            imp[a] += (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
         }
         self.impulse.clear();
         self.impulse.extend_from_slice(imp.as_slice());
-        self.mu.copy_from_slice(mu.as_slice());
+        // In the units of the step's unknowns: `ŵ = h² λ = h (c μ) / b_{s−1}`.
+        for (w, x) in self.mu.iter_mut().zip(mu.iter()) {
+            *w = h * x / sch.b()[s - 1];
+        }
         Ok(())
     }
 }

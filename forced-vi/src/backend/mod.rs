@@ -153,8 +153,9 @@ pub(crate) trait StepBackend {
     /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
     /// over the last solved step (DESIGN §11); `None` without constraints.
     fn constraint_impulse(&self) -> Option<&[f64]>;
-    /// A constrained model: the multipliers `λ_{s−1}` at the end of the last solved step
-    /// (those of its earlier control points follow the increments in [`Self::z`]).
+    /// A constrained model: the multipliers at the end of the last solved step, as
+    /// `h² λ_{s−1}` (the units of those of its earlier control points, which follow the
+    /// increments in [`Self::z`]).
     fn end_multipliers(&self) -> &[f64];
     /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
