@@ -117,6 +117,21 @@ pub mod prelude {
     };
 }
 
+// The Rust code blocks of the READMEs compile and run as doctests (`cfg(doctest)`: nothing
+// of this is in the library itself). The workspace README is outside this package, so a
+// packaged crate never reads it.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct CrateReadme;
+
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct WorkspaceReadme;
+
+#[cfg(doctest)]
+#[doc = include_str!("../../forced-vi-macros/README.md")]
+pub struct MacrosReadme;
+
 /// Paths used by macro-generated code. Not a public API.
 #[doc(hidden)]
 pub mod __private;
