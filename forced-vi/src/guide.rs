@@ -168,7 +168,7 @@
 //!
 //! - arithmetic, with parameters and literals written as plain numbers (`0.5 * x`,
 //!   `x_dot * x_dot / 2`, `2 * x`: an integer literal is an `f64` where a number is meant);
-//! - the methods of num-dual's `DualNum`: `sin`, `cos`, `tan`, `exp`, `ln`, `sqrt`, `powi`,
+//! - the methods of num-dual's `DualNum`: `sin`, `cos`, `exp`, `ln`, `sqrt`, `powi`,
 //!   `powf`, `tanh`, `abs`, `mul_add`, ..., and `x.max(y)`, `x.min(y)`, `k.powf(x)`;
 //! - blocks with `let` (and `let mut`), `if`/`else` (on coordinates, parameters or `t`),
 //!   `for` loops over integer ranges, and index sums `(a..b).map(|i| ..).sum()`.
@@ -312,9 +312,9 @@
 //!
 //! | flag | means | the integrator then |
 //! |---|---|---|
-//! | `has_force: false` | `F ≡ 0` | skips the force and its derivatives |
-//! | `force_uses_velocity: false` | `∂F/∂v ≡ 0` | skips that block of the step Jacobian |
-//! | `constant_mass: true` | `E = ∂²L/∂v²` constant and `C = ∂²L/∂v∂q ≡ 0` | solves for velocities once, linearly |
+//! | `has_force: false` | `F ≡ 0` | skips the force and the work `W` |
+//! | `force_uses_velocity: false` | `∂F/∂v ≡ 0` | leaves `∂F/∂v` out of the general kernels |
+//! | `constant_mass: true` | `E = ∂²L/∂v²` constant and `C = ∂²L/∂v∂q ≡ 0` | builds the `E` part of the step Jacobian once per step size, skips `C`, solves for velocities in one linear step and skips the mass check at step ends |
 //! | `uses_time: true` | `L` or `F` depends on `t` | evaluates each node at its time and adds `∫ ∂L/∂t` to the balance |
 //!
 //! The attribute proves each claim from the expressions and claims nothing it cannot prove:
