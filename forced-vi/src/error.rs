@@ -71,6 +71,10 @@ impl NewtonFailure {
 }
 
 /// An integration that could not start or could not go on.
+///
+/// The errors of bad input that a new user meets first (a bad step size or tolerance, a
+/// singular mass matrix, an initial state the model cannot start from) are shown with their
+/// messages in the [guide](crate::guide#bad-input).
 #[derive(Clone, Debug, Error, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
