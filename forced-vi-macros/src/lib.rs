@@ -23,7 +23,38 @@ mod split;
 
 use proc_macro::TokenStream;
 
-/// Writes the `ForcedLagrangian` impl of a model; see the forced-vi README, "Writing a model".
+/// Writes the `ForcedLagrangian` impl of a model from its Lagrangian and its force.
+///
+/// ```text
+/// #[forced_lagrangian(
+///     coordinates(<coordinate>, ...),
+///     lagrangian = <expr>,
+///     force(<entry>, ...),            // optional: without it, a conservative model
+/// )]
+/// struct Model { <parameter>: f64, ... }      // or struct Model<const N: usize> { ... }
+///
+/// <coordinate> = x                 a scalar; its velocity is `x_dot`
+///              | q: [f64; 4]       an array of literal length; `q[i]`, `q_dot[i]`
+///              | q: [f64; N]       `N` the struct's const parameter (the only coordinate)
+/// <entry>      = x = <expr>        the force on a scalar
+///              | q[i] = <expr>     on every element of an array, `i` its index
+///              | q = [<expr>, ...] on each element of an array of literal length
+/// <expr>       = arithmetic on coordinates, velocities, parameters (by name), number
+///                literals and the time `t`; methods (`sin`, `cos`, `exp`, `ln`, `sqrt`,
+///                `powi`, `powf`, `max`, `min`, ...); blocks with `let`, `if`/`else`,
+///                `for i in a..b`; index sums `(a..b).map(|i| ...).sum()`
+/// ```
+///
+/// Every coordinate has one force entry; parameters are `f64` fields; `t` and names starting
+/// with `__fvi` are reserved. Mistakes are compile errors at the user's tokens. The
+/// generated impl sets `STRUCTURE` from what it proves about the expressions, and a
+/// Lagrangian made of local terms also gets sparse node kernels.
+///
+/// The reference, every form with an example that runs and the compile errors, is the
+/// module `forced_vi::guide`
+/// ([docs.rs](https://docs.rs/forced-vi/latest/forced_vi/guide/index.html)). Use the
+/// attribute through `forced_vi::forced_lagrangian` or `forced_vi::prelude`: the generated
+/// code names `forced_vi`'s paths.
 #[proc_macro_attribute]
 pub fn forced_lagrangian(args: TokenStream, item: TokenStream) -> TokenStream {
     entry(args.into(), item.into()).into()

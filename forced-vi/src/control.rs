@@ -52,10 +52,13 @@ use crate::error::Error;
 /// Relative and absolute tolerances, per coordinate; the same pair applies to the
 /// coordinate's position and its momentum.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Tolerance<const N: usize> {
     /// Relative tolerances.
+    #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
     pub rtol: [f64; N],
     /// Absolute tolerances.
+    #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
     pub atol: [f64; N],
 }
 

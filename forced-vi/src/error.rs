@@ -4,6 +4,7 @@ use thiserror::Error;
 
 /// A scheme id or coefficient set that cannot be built.
 #[derive(Clone, Debug, Error, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
 pub enum SchemeError {
     /// The id is not one of `midpoint`, `trapezoid`, `alpha(<value>)`, `lobatto<s>`.
@@ -27,6 +28,7 @@ pub enum SchemeError {
 
 /// Why a Newton solve failed; the integrator adds the step and the time.
 #[derive(Clone, Copy, Debug, Error, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
 pub enum NewtonFailure {
     /// The iteration cap was reached.
@@ -69,7 +71,12 @@ impl NewtonFailure {
 }
 
 /// An integration that could not start or could not go on.
+///
+/// The errors of bad input that a new user meets first (a bad step size or tolerance, a
+/// singular mass matrix, an initial state the model cannot start from) are shown with their
+/// messages in the [guide](crate::guide#bad-input).
 #[derive(Clone, Debug, Error, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
 pub enum Error {
     /// The step size is not a positive finite number.

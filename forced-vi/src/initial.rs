@@ -9,19 +9,24 @@ use crate::scalar::all_finite;
 
 /// Initial data: `(q₀, v₀)` as in the paper, or `(q₀, p₀)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum InitialState<const N: usize> {
     /// Position and velocity; the momentum is `p₀ = L_v(q₀, v₀)`.
     Velocity {
         /// `q₀`.
+        #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
         q: [f64; N],
         /// `v₀`.
+        #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
         v: [f64; N],
     },
     /// Position and momentum; the velocity solves `L_v(q₀, v₀) = p₀`.
     Momentum {
         /// `q₀`.
+        #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
         q: [f64; N],
         /// `p₀`.
+        #[cfg_attr(feature = "serde", serde(with = "serde_big_array::BigArray"))]
         p: [f64; N],
     },
 }

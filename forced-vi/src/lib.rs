@@ -32,6 +32,20 @@
 //! assert!(end.energy_balance.abs() < 1e-7); // order 4: about 2e-8 at h = 0.01
 //! # Ok::<(), forced_vi::Error>(())
 //! ```
+//!
+//! The same model is three lines with the attribute
+//! [`#[forced_lagrangian]`](forced_lagrangian), which writes the impl, checks the model at
+//! compile time and specialises its derivatives. The [`guide`] is its reference, every form
+//! with an example that runs, and says what `STRUCTURE` means, when the sparse backend is
+//! taken, what an `Ok` promises and which errors bad input gets.
+//!
+//! # Cargo features
+//!
+//! - `rayon` (default): ensemble members run in parallel ([`ensemble`]).
+//! - `sparse` (default): the sparse backend for large models (faer's sparse LU); without
+//!   it every run is dense and [`LinearPath::Sparse`] is a typed error.
+//! - `serde`: `Serialize`/`Deserialize` on the results ([`Trajectory`], [`StepRecord`],
+//!   [`FinalState`], ...) and `Serialize` on the errors; see the [guide](guide#export).
 #![warn(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 // `RunFailure` carries what a run computed before it failed (records, samples, the last
@@ -58,6 +72,7 @@
 //! | the integrator builder, the choice of backend ([`LinearPath`]), the run methods | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
+//! | the reference of `#[forced_lagrangian]`, the promises of a run, bad input, export | [`guide`] |
 //!
 //! Data flows one way: model → step equations → Newton and linear algebra → backend →
 //! stepper → integrator → ensemble; no module imports one that imports it.
@@ -67,6 +82,7 @@ pub mod control;
 pub mod doubled;
 pub mod ensemble;
 mod error;
+pub mod guide;
 pub mod initial;
 pub mod integrator;
 pub mod model;
@@ -92,9 +108,8 @@ pub use trajectory::{
     Trajectory,
 };
 
-/// Writes the [`ForcedLagrangian`] impl of a model from its Lagrangian and force.
-///
-/// See the crate README, section "Writing a model", for the syntax.
+/// The runnable reference of every form, with the compile errors, is the [`guide`]
+/// ([Writing a model](guide#writing-a-model)).
 pub use forced_vi_macros::forced_lagrangian;
 
 /// The names most programs need.
@@ -104,6 +119,21 @@ pub mod prelude {
         StepRecord, Tolerance, Trajectory,
     };
 }
+
+// The Rust code blocks of the READMEs compile and run as doctests (`cfg(doctest)`: nothing
+// of this is in the library itself). The workspace README is outside this package, so a
+// packaged crate never reads it.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct CrateReadme;
+
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct WorkspaceReadme;
+
+#[cfg(doctest)]
+#[doc = include_str!("../../forced-vi-macros/README.md")]
+pub struct MacrosReadme;
 
 /// Paths used by macro-generated code. Not a public API.
 #[doc(hidden)]

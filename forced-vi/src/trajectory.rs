@@ -9,6 +9,7 @@ use crate::scalar::all_finite;
 
 /// The state after one step, with its diagnostics (DESIGN §4).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct StepRecord<const N: usize> {
     /// Step index; 0 is the initial state.
     pub step: usize,
@@ -46,6 +47,7 @@ pub struct StepRecord<const N: usize> {
 
 /// Totals over a run.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct RunStats {
     /// Steps completed.
     pub steps: usize,
@@ -70,6 +72,7 @@ impl RunStats {
 
 /// A finished run: every record, initial state first.
 #[derive(Clone, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Trajectory<const N: usize> {
     /// The records, `records[0]` being the initial state.
     pub records: Vec<StepRecord<N>>,
@@ -106,6 +109,7 @@ impl<const N: usize> Trajectory<N> {
 
 /// The end of a run without per-step diagnostics ([`crate::Integrator::final_state`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct FinalState<const N: usize> {
     /// The final time.
     pub t: f64,
@@ -180,6 +184,7 @@ pub struct AdjointGradient<const N: usize> {
 /// `O(h^min(3, p))` for a scheme of order `p` (measured in the `dense_` tests). The
 /// Galerkin path itself is only `O(h^s)` between its control points.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct DenseState<const N: usize> {
     /// The time.
     pub t: f64,
@@ -257,6 +262,7 @@ pub(crate) fn hermite<const N: usize>(
 /// # Ok::<(), forced_vi::Error>(())
 /// ```
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[error("{error} (after {} steps)", stats.steps)]
 pub struct RunFailure<const N: usize> {
     /// What stopped the run.

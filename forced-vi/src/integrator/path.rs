@@ -24,6 +24,7 @@ use crate::{backend::SparseBackend, sparse::record_node_pattern};
 /// the dense one. The dense backend takes at most [`LinearPath::DENSE_MAX_DOF`]
 /// coordinates: a larger model without sparse kernels is [`Error::ModelTooLarge`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[non_exhaustive]
 pub enum LinearPath {
     /// By size and density (see above).

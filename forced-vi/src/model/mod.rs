@@ -20,6 +20,7 @@ pub use sparse_node::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
 /// The flags are promises: `false` means the quantity is identically zero (or constant), and
 /// the runtime may skip work for it. The default, [`Structure::GENERAL`], promises nothing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Structure {
     /// The model has a non-conservative force.
     pub has_force: bool,

@@ -38,6 +38,7 @@ pub trait NonlinearSystem {
 
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct NewtonReport {
     /// Linear solves performed.
     pub iterations: usize,

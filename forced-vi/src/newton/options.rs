@@ -2,6 +2,7 @@
 
 /// Options of the Newton solver. `Default` gives the values listed per field.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[non_exhaustive]
 pub struct NewtonOptions {
     /// Cap on iterations per solve (default 12).

@@ -18,6 +18,7 @@ use crate::error::SchemeError;
 /// assert_eq!("lobatto3".parse::<SchemeId>().unwrap().to_string(), "lobatto3");
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum SchemeId {
     /// `L_d = h L((q₀ + q₁)/2, (q₁ − q₀)/h)`: order 2.
     Midpoint,
