@@ -11,6 +11,9 @@
 //! - [Expressions](#expressions): `let`, `if`, `for`, `(a..b).map(..).sum()`, methods;
 //! - [Forces](#forces): none, `x = ..`, `q[i] = ..`, `q = [..]`;
 //! - [Time](#time-driven-models): `t` in the Lagrangian and the force;
+//! - [Constraints](#constraints): `constraints(g1, g2, ...)`, holonomic `g(t, q) = 0`;
+//! - [Parameters and sensitivities](#parameters-and-sensitivities): derivatives of the
+//!   flow in the initial data and the struct's fields, forward and adjoint;
 //! - [`STRUCTURE`](#structure): what the generated flags mean;
 //! - [The sparse backend](#the-sparse-backend): when [`LinearPath::Auto`] takes it;
 //! - [What an `Ok` promises](#what-an-ok-promises);
@@ -30,6 +33,8 @@
 //!   coordinates, velocities, parameters and the time `t`.
 //! - `force(...)`, optional: the non-conservative generalised force `F(q, v)`, one entry per
 //!   coordinate.
+//! - `constraints(...)`, optional: holonomic constraints, expressions of the coordinates
+//!   (and `t`) that must vanish ([Constraints](#constraints)).
 //!
 //! The struct's fields are the model's parameters; each is an `f64` and is read by name in
 //! the expressions (`k`, not `self.k`). The struct may be generic over one const parameter,
@@ -303,6 +308,97 @@
 //! A model written by hand (without the attribute) overrides `lagrangian_at`/`force_at`
 //! and sets `uses_time` in its `STRUCTURE` ([`Structure::GENERAL_DRIVEN`]); the integrator
 //! checks the flag on the first step.
+//!
+//! # Constraints
+//!
+//! `constraints(g1, g2, ...)` lists expressions of the coordinates, the parameters and `t`
+//! that must vanish on the motion (DESIGN §11). The step then carries multipliers at its
+//! control points (the constrained Lobatto IIIA–IIIB pair; RATTLE for `lobatto2`), keeps
+//! `g = 0` and `G v = 0` to round-off at every step, and reports the mean constraint force
+//! `−Gᵀλ` of each step in [`StepRecord::constraint_force`](crate::StepRecord) and
+//! `max(|g|, |G v|)` in `constraint_residual`. Fixed and adaptive steps work; the sparse
+//! backend, non-Lobatto schemes and sensitivities of constrained models are
+//! [`Error::UnsupportedConstraints`]. Initial data must lie on the constraints
+//! ([`Error::InconsistentInitialState`]); [`InitialState::projected`] puts it there.
+//!
+//! ```
+//! use forced_vi::prelude::*;
+//!
+//! /// A spherical pendulum: three Cartesian coordinates, one rod.
+//! #[forced_lagrangian(
+//!     coordinates(x, y, z),
+//!     lagrangian = 0.5 * m * (x_dot * x_dot + y_dot * y_dot + z_dot * z_dot) - m * g * z,
+//!     constraints(0.5 * (x * x + y * y + z * z - l * l)),
+//! )]
+//! struct Spherical { m: f64, g: f64, l: f64 }
+//!
+//! let model = Spherical { m: 1.0, g: 9.81, l: 1.0 };
+//! assert_eq!(model.constraint_count(), 1);
+//! // Off the sphere, and a velocity across it: `projected` makes both consistent.
+//! let init = InitialState::projected(&model, [0.6, 0.0, -0.9], [0.0, 1.0, 0.2])?;
+//! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
+//!     .run(init, 5.0)
+//!     .map_err(|failure| failure.error)?;
+//! // Rotations about the vertical are a symmetry: L_z = m (x ẏ − y ẋ) is kept.
+//! let lz = |r: &forced_vi::StepRecord<3>| r.q[0] * r.p[1] - r.q[1] * r.p[0];
+//! let lz0 = lz(&run.records[0]);
+//! assert!(run.records.iter().all(|r| (lz(r) - lz0).abs() < 1e-12));
+//! assert!(run.records.iter().all(|r| r.constraint_residual < 1e-13));
+//! # Ok::<(), forced_vi::Error>(())
+//! ```
+//!
+//! A constraint may not read a velocity (nonholonomic constraints are not supported), and
+//! a model needs fewer constraints than coordinates:
+//!
+//! ```compile_fail
+//! use forced_vi::prelude::*;
+//! #[forced_lagrangian(
+//!     coordinates(x, y),
+//!     lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot),
+//!     constraints(x * x_dot + y * y_dot), // error: reads the velocity `x_dot`
+//! )]
+//! struct Rolling {}
+//! ```
+//!
+//! A model written by hand declares constraints by overriding
+//! [`ForcedLagrangian::constraint_count`] and [`ForcedLagrangian::constraints`].
+//!
+//! # Parameters and sensitivities
+//!
+//! [`Integrator::sensitivities`] returns, with the final state, `∂(q_T, v_T)/∂(q_0, v_0)`
+//! and `∂(q_T, v_T)/∂θ` for the struct's fields `θ`, in field order; for a scalar loss of
+//! the final state, [`Integrator::adjoint_gradient`] gives its gradient by the discrete
+//! adjoint at the cost of about one more run (DESIGN §12). Both are exact derivatives of
+//! the discrete flow (the factored step Jacobian, no finite differences). The attribute
+//! generates [`ForcedLagrangian::lagrangian_with`] and [`ForcedLagrangian::force_with`],
+//! the model with its fields as dual numbers; a model written by hand declares no
+//! parameters unless it overrides them and [`ForcedLagrangian::parameter_names`].
+//!
+//! ```
+//! use forced_vi::prelude::*;
+//!
+//! #[forced_lagrangian(
+//!     coordinates(x),
+//!     lagrangian = 0.5 * x_dot * x_dot - 0.5 * k * x * x,
+//!     force(x = -c * x_dot),
+//! )]
+//! struct Damped { k: f64, c: f64 }
+//!
+//! let model = Damped { k: 1.0, c: 0.0 };
+//! assert_eq!(model.parameter_names(), ["k", "c"]);
+//! let integ = Integrator::new(&model, Scheme::lobatto(4)?, 0.01)?;
+//! let init = InitialState::from_velocity([1.0], [0.0]);
+//! let s = integ.sensitivities(init, 1.0)?;
+//! // x(T) = cos(√k T): ∂x_T/∂x_0 = cos 1, ∂x_T/∂k = −(T/2) sin 1 at k = 1.
+//! assert!((s.wrt_initial[(0, 0)] - 1f64.cos()).abs() < 1e-9);
+//! assert!((s.wrt_parameters[(0, 0)] + 0.5 * 1f64.sin()).abs() < 1e-9);
+//! // The adjoint gradient of ℓ = x_T agrees.
+//! let g = integ.adjoint_gradient(init, 1.0, |end| {
+//!     (nalgebra::SVector::from([1.0]), nalgebra::SVector::zeros())
+//! })?;
+//! assert!((g.wrt_parameters[0] - s.wrt_parameters[(0, 0)]).abs() < 1e-12);
+//! # Ok::<(), forced_vi::Error>(())
+//! ```
 //!
 //! # `STRUCTURE`
 //!

@@ -133,6 +133,7 @@ pub struct FinalState<const N: usize> {
 /// differences. In an adaptive run the step sequence is held fixed: the derivative is that
 /// of the same sequence of steps from perturbed data, not of the controller's choices.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Sensitivities<const N: usize> {
     /// The final time.
     pub t: f64,
@@ -156,6 +157,7 @@ pub struct Sensitivities<const N: usize> {
 /// The gradient of a loss of the final state by the discrete adjoint
 /// ([`crate::Integrator::adjoint_gradient`]).
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct AdjointGradient<const N: usize> {
     /// The final time.
     pub t: f64,
