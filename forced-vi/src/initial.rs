@@ -263,14 +263,17 @@ impl<const N: usize> InitialState<N> {
         let singular = Error::UnsupportedConstraints {
             message: "the constraints are singular (G Gᵀ not invertible) at the initial state",
         };
+        // Gauss–Newton to round-off (quadratic: a few steps), accepted within the check's
+        // tolerance if round-off stops it earlier.
         let mut done = false;
         for _ in 0..50 {
             let (g, _, jac) = constraint_residuals(model, &q, &v);
             if !(g.iter().all(|x| x.is_finite()) && jac.iter().all(|x| x.is_finite())) {
                 return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
             }
-            if g.amax() <= 0.01 * CONSTRAINT_TOL * (1.0 + q.amax()) {
-                done = true;
+            let size = 1.0 + q.amax();
+            done = g.amax() <= 0.01 * CONSTRAINT_TOL * size;
+            if g.amax() <= 16.0 * f64::EPSILON * size * size {
                 break;
             }
             let y = (&jac * jac.transpose())
