@@ -68,21 +68,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
     ) -> Result<FinalState<N>, RunFailure<N>> {
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
-            while let Some(rec) = stepper.next() {
-                if let Err(e) = rec {
-                    return Err(stepper.failure(e));
-                }
-            }
-            let stats = stepper.stats();
-            let end = stepper.finish().map_err(|e| stepper.failure(e))?;
-            Ok(FinalState {
-                t: end.t,
-                q: end.q,
-                p: end.p,
-                v: end.v,
-                energy: end.energy,
-                stats,
-            })
+            to_the_end(stepper)
         })
     }
 
@@ -122,13 +108,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
-            while let Some(rec) = stepper.next() {
-                if let Err(e) = rec {
-                    return Err(stepper.failure(e));
-                }
-            }
-            let stats = stepper.stats();
-            let end = stepper.finish().map_err(|e| stepper.failure(e))?;
+            let end = to_the_end(stepper)?;
+            let stats = end.stats;
             let (wrt_initial, wrt_parameters) = stepper
                 .tangent_in_velocities()
                 .map_err(|e| stepper.failure(e))?;
@@ -182,23 +163,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         self.open(init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.keep_tape();
-            while let Some(rec) = stepper.next() {
-                if let Err(e) = rec {
-                    return Err(stepper.failure(e));
-                }
-            }
-            let stats = stepper.stats();
-            let tape_bytes = stepper.tape_bytes();
-            let end = stepper.finish().map_err(|e| stepper.failure(e))?;
-            let fin = FinalState {
-                t: end.t,
-                q: end.q,
-                p: end.p,
-                v: end.v,
-                energy: end.energy,
-                stats,
-            };
-            let (gq, gv) = dloss(&fin);
+            let end = to_the_end(stepper)?;
+            let (stats, tape_bytes) = (end.stats, stepper.tape_bytes());
+            let (gq, gv) = dloss(&end);
             let (wrt_initial, wrt_parameters) = stepper
                 .adjoint((gq.as_slice(), gv.as_slice()))
                 .map_err(|e| stepper.failure(e))?;
@@ -262,6 +229,27 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         let adaptive = self.tolerance.is_some();
         self.open(init, t_final, |stepper| collect(stepper, adaptive))
     }
+}
+
+/// Steps a lean run to its end and returns its final state (the velocity solved once).
+fn to_the_end<M: ForcedLagrangian<N>, const N: usize>(
+    stepper: &mut Stepper<'_, M, N>,
+) -> Result<FinalState<N>, RunFailure<N>> {
+    while let Some(rec) = stepper.next() {
+        if let Err(e) = rec {
+            return Err(stepper.failure(e));
+        }
+    }
+    let stats = stepper.stats();
+    let end = stepper.finish().map_err(|e| stepper.failure(e))?;
+    Ok(FinalState {
+        t: end.t,
+        q: end.q,
+        p: end.p,
+        v: end.v,
+        energy: end.energy,
+        stats,
+    })
 }
 
 /// Collects a run's records. A fixed-step run reserves all its records up front, so that a
