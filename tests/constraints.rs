@@ -253,8 +253,25 @@ fn constraint_errors_are_typed() {
         sparse
             .final_state(cartesian_start(), 1.0)
             .map_err(|f| f.error),
+        Err(Error::NoSparseKernels { .. })
+    ));
+    // Sparse kernels that do not evaluate the model's constraints: refused on the sparse
+    // backend, the dense one otherwise.
+    let chain = NoSparseConstraints(RigidChain::default());
+    let forced = Integrator::new(&chain, Scheme::lobatto(3).expect("s"), 0.01)
+        .expect("integrator")
+        .linear_path(LinearPath::Sparse);
+    assert!(matches!(
+        forced
+            .final_state(chain.0.initial(), 0.1)
+            .map_err(|f| f.error),
         Err(Error::UnsupportedConstraints { .. })
     ));
+    let auto = Integrator::new(&chain, Scheme::lobatto(3).expect("s"), 0.01).expect("integrator");
+    assert_eq!(
+        auto.path_for(&chain.0.initial()).expect("path"),
+        LinearPath::Dense
+    );
     // Derivatives do not carry the multipliers yet: refused, not wrong.
     assert!(matches!(
         integ
@@ -292,7 +309,7 @@ fn constraint_macro_model_equals_the_hand_written_one() {
         l: L,
         c: C,
     };
-    assert_eq!(model.constraint_count(), 1);
+    assert_eq!(ForcedLagrangian::constraint_count(&model), 1);
     let run = |end: forced_vi::FinalState<2>| (end.q, end.p);
     let a = run(
         Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
@@ -508,4 +525,247 @@ fn constraint_dense_output_and_ensembles_work() {
         let g = 0.5 * (end.q[0] * end.q[0] + end.q[1] * end.q[1] - L * L);
         assert!(g.abs() < 1e-13, "{g:.1e}");
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// The sparse backend (DESIGN §9, §11): the hand-written rigid chain of
+// `forced_vi_models::rigid_chain`, with sparse node and constraint kernels.
+
+use forced_vi::sparse::{NodeSink, SparseNode};
+use forced_vi_models::rigid_chain::RigidChain;
+
+/// The rigid chain with sparse node kernels that leave its constraints out.
+struct NoSparseConstraints(RigidChain<16>);
+
+impl ForcedLagrangian<16> for NoSparseConstraints {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 16], v: &[D; 16]) -> D {
+        self.0.lagrangian(q, v)
+    }
+    fn force<D: Scalar>(&self, q: &[D; 16], v: &[D; 16]) -> [D; 16] {
+        self.0.force(q, v)
+    }
+    fn constraint_count(&self) -> usize {
+        ForcedLagrangian::constraint_count(&self.0)
+    }
+    fn constraints<D: Scalar>(&self, t: D, q: &[D; 16], g: &mut [D]) {
+        self.0.constraints(t, q, g)
+    }
+    fn sparse_node(&self) -> Option<&dyn SparseNode> {
+        Some(self)
+    }
+}
+
+impl SparseNode for NoSparseConstraints {
+    fn dof(&self) -> usize {
+        16
+    }
+    fn eval(&self, t: f64, q: &[f64], v: &[f64], sink: &mut NodeSink<'_>) {
+        SparseNode::eval(&self.0, t, q, v, sink)
+    }
+    fn lagrangian_value(&self, t: f64, q: &[f64], v: &[f64]) -> f64 {
+        SparseNode::lagrangian_value(&self.0, t, q, v)
+    }
+}
+
+/// A run of `model` with `path`, its records.
+fn chain_run<const N: usize>(
+    model: &RigidChain<N>,
+    scheme: Scheme,
+    h: f64,
+    t: f64,
+    path: LinearPath,
+) -> forced_vi::Trajectory<N> {
+    Integrator::new(model, scheme, h)
+        .expect("integrator")
+        .linear_path(path)
+        .run(model.initial(), t)
+        .expect("run")
+}
+
+#[test]
+fn constraint_chain_sparse_backend_agrees_with_the_dense_one() {
+    let model = RigidChain::<16>::default();
+    for s in 2..=5 {
+        let scheme = Scheme::lobatto(s).expect("scheme");
+        let dense = chain_run(&model, scheme.clone(), 0.01, 0.5, LinearPath::Dense);
+        let sparse = chain_run(&model, scheme, 0.01, 0.5, LinearPath::Sparse);
+        let (a, b) = (
+            dense.records.last().expect("end"),
+            sparse.records.last().expect("end"),
+        );
+        let dq = (a.q - b.q).amax();
+        let dp = (a.p - b.p).amax();
+        let df = (a.constraint_force - b.constraint_force).amax();
+        let worst = sparse
+            .records
+            .iter()
+            .map(|r| r.constraint_residual)
+            .fold(0.0, f64::max);
+        println!(
+            "lobatto{s}: |dq| {dq:.2e} |dp| {dp:.2e} |d force| {df:.2e} worst |g|,|Gv| {worst:.2e}"
+        );
+        assert!(dq < 1e-12 && dp < 1e-12, "lobatto{s}: {dq:.2e} {dp:.2e}");
+        assert!(
+            df < 1e-9 * a.constraint_force.amax(),
+            "lobatto{s}: {df:.2e}"
+        );
+        assert!(worst < 1e-13, "lobatto{s}: {worst:.2e}");
+    }
+}
+
+/// The reference state `(q, v)` of the 256-link chain at `t`
+/// (`scripts/rigid_chain_reference.py`: minimal coordinates, DOP853 at 1e-13).
+fn chain_reference(t: f64) -> (Vec<f64>, Vec<f64>) {
+    let text = include_str!("../data/reference/rigid_chain_256.csv");
+    for line in text.lines().skip(1) {
+        let row: Vec<f64> = line
+            .split(',')
+            .map(|x| x.parse().expect("number"))
+            .collect();
+        if row[0] == t {
+            let n = (row.len() - 1) / 2;
+            return (row[1..=n].to_vec(), row[n + 1..].to_vec());
+        }
+    }
+    panic!("no reference row at t = {t}");
+}
+
+/// The slope of `log e` against `log h` by least squares.
+fn fitted_slope(hs: &[f64], es: &[f64]) -> f64 {
+    let (x, y): (Vec<f64>, Vec<f64>) = hs.iter().zip(es).map(|(h, e)| (h.ln(), e.ln())).unzip();
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(&y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    sxy / sxx
+}
+
+#[test]
+fn constraint_chain_256_links_on_the_sparse_backend_converges_at_its_order() {
+    const N: usize = 512;
+    let model = RigidChain::<N>::default();
+    let (t_end, (q_ref, v_ref)) = (0.25, chain_reference(0.25));
+    // Steps within the schemes' stability intervals on the chain's fastest transverse mode
+    // (ω ≈ 1600: lobatto2 fails above h ≈ 1.3e-3, lobatto3 above 1.7e-3, as Störmer–Verlet
+    // does above h ω = 2).
+    for (s, hs) in [
+        (2, [1e-3, 5e-4, 2.5e-4, 1.25e-4]),
+        (3, [1.5e-3, 1e-3, 7.5e-4, 5e-4]),
+    ] {
+        let scheme = Scheme::lobatto(s).expect("scheme");
+        let integrator = Integrator::new(&model, scheme.clone(), hs[0]).expect("integrator");
+        assert_eq!(
+            integrator.path_for(&model.initial()).expect("path"),
+            LinearPath::Sparse,
+            "a 512-coordinate model with sparse kernels takes the sparse backend"
+        );
+        let mut errors = Vec::new();
+        for &h in &hs {
+            let run = chain_run(&model, scheme.clone(), h, t_end, LinearPath::Auto);
+            let end = run.records.last().expect("end");
+            let eq = (0..N)
+                .map(|a| (end.q[a] - q_ref[a]).abs())
+                .fold(0.0, f64::max);
+            let ev = (0..N)
+                .map(|a| (end.v[a] - v_ref[a]).abs())
+                .fold(0.0, f64::max);
+            let worst = run
+                .records
+                .iter()
+                .map(|r| r.constraint_residual)
+                .fold(0.0, f64::max);
+            println!("lobatto{s} h {h}: |q − ref| {eq:.2e}  |v − ref| {ev:.2e}  max(|g|, |Gv|) {worst:.2e}");
+            // Relative to the constraints' own scale, `g ~ ℓ²`.
+            let bound = 1e-12 * model.l * model.l;
+            assert!(
+                worst < bound,
+                "lobatto{s} h {h}: constraint residual {worst:.2e}"
+            );
+            errors.push((eq, ev));
+        }
+        let order = 2.0 * s as f64 - 2.0;
+        let (eq, ev): (Vec<f64>, Vec<f64>) = errors.into_iter().unzip();
+        let (sq, sv) = (fitted_slope(&hs, &eq), fitted_slope(&hs, &ev));
+        println!("lobatto{s}: fitted order {sq:.2} in q, {sv:.2} in v");
+        assert!(
+            (sq - order).abs() <= 0.3 && (sv - order).abs() <= 0.3,
+            "lobatto{s}: {sq:.2}, {sv:.2}"
+        );
+    }
+}
+
+#[test]
+fn constraint_chain_256_links_adaptive_dense_output_and_projection_on_the_sparse_backend() {
+    const N: usize = 512;
+    let model = RigidChain::<N>::default();
+    let (q25, v25) = chain_reference(0.25);
+    let (q50, v50) = chain_reference(0.5);
+    let dist = |x: &[f64], y: &[f64]| {
+        x.iter()
+            .zip(y)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    };
+    for (s, tol) in [(3, 1e-7), (4, 1e-9)] {
+        let integrator =
+            Integrator::adaptive(&model, Scheme::lobatto(s).expect("scheme"), tol, tol)
+                .expect("integrator");
+        assert_eq!(
+            integrator.path_for(&model.initial()).expect("path"),
+            LinearPath::Sparse
+        );
+        let run = integrator.run(model.initial(), 0.5).expect("adaptive run");
+        let end = run.last().expect("end");
+        let mid = run.at(0.25).expect("dense output");
+        let (eq, ev) = (dist(end.q.as_slice(), &q50), dist(end.v.as_slice(), &v50));
+        let (mq, mv) = (dist(mid.q.as_slice(), &q25), dist(mid.v.as_slice(), &v25));
+        let worst = run
+            .records
+            .iter()
+            .map(|r| r.constraint_residual)
+            .fold(0.0, f64::max);
+        println!(
+            "lobatto{s} tol {tol:.0e}: {} steps; at 0.5 |q| {eq:.2e} |v| {ev:.2e}; at(0.25) |q| {mq:.2e} |v| {mv:.2e}; max(|g|, |Gv|) {worst:.2e}",
+            run.records.len() - 1
+        );
+        // Within 10 tol in q and in p = m v (the estimate controls (q, p)); the dense output
+        // between steps is Hermite-cubic: O(h⁴).
+        let ep = model.m * ev;
+        assert!(
+            eq < 10.0 * tol && ep < 10.0 * tol,
+            "lobatto{s}: {eq:.2e} {ep:.2e}"
+        );
+        assert!(
+            mq < 1e-6 && mv < 1e-4,
+            "lobatto{s}: dense output {mq:.2e} {mv:.2e}"
+        );
+        assert!(worst < 1e-12 * model.l * model.l, "lobatto{s}: {worst:.2e}");
+    }
+    // Projection on sparse storage: perturbed data made consistent, then run.
+    let InitialState::Velocity { q, v } = model.initial() else {
+        panic!("velocity form")
+    };
+    let (mut q_off, mut v_off) = (q, v);
+    for a in 0..N {
+        q_off[a] += 1e-4 * ((a as f64) * 0.7).sin();
+        v_off[a] += 1e-2 * ((a as f64) * 0.3).cos();
+    }
+    let bad = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
+        .expect("integrator")
+        .run(InitialState::from_velocity(q_off, v_off), 0.01);
+    assert!(matches!(
+        bad.map(|_| ()).map_err(|f| f.error),
+        Err(Error::InconsistentInitialState { .. })
+    ));
+    let fixed = InitialState::projected(&model, q_off, v_off).expect("projection");
+    let run = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
+        .expect("integrator")
+        .run(fixed, 0.01)
+        .expect("run from projected data");
+    let worst = run
+        .records
+        .iter()
+        .map(|r| r.constraint_residual)
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-12 * model.l * model.l, "{worst:.2e}");
 }

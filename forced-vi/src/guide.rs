@@ -316,9 +316,13 @@
 //! control points (the constrained Lobatto IIIA–IIIB pair; RATTLE for `lobatto2`), keeps
 //! `g = 0` and `G v = 0` to round-off at every step, and reports the mean constraint force
 //! `−Gᵀλ` of each step in [`StepRecord::constraint_force`](crate::StepRecord) and
-//! `max(|g|, |G v|)` in `constraint_residual`. Fixed and adaptive steps work; the sparse
-//! backend, non-Lobatto schemes and sensitivities of constrained models are
-//! [`Error::UnsupportedConstraints`]. Initial data must lie on the constraints
+//! `max(|g|, |G v|)` in `constraint_residual`. Fixed and adaptive steps, dense output and
+//! ensembles work; non-Lobatto schemes and sensitivities of constrained models are
+//! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
+//! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
+//! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),
+//! [`SparseNode::eval_constraints`](crate::model::SparseNode::eval_constraints)); the
+//! attribute does not emit sparse constraint kernels yet. Initial data must lie on the constraints
 //! ([`Error::InconsistentInitialState`]); [`InitialState::projected`] puts it there.
 //!
 //! ```

@@ -200,44 +200,34 @@ fn constraint_residuals<M: ForcedLagrangian<N>, const N: usize>(
     (g, gv, jac)
 }
 
-/// `max(|g(t, q)|, |G(q) v|)` of a constrained model (0 without constraints).
-pub(crate) fn constraint_residual<M: ForcedLagrangian<N>, const N: usize>(
+/// `|g(t, q)|`, `|G(q) v|` and `|G(q)|` (max-norms) of a constrained model, from the
+/// general dual-number kernels (the dense backend's).
+pub(crate) fn constraint_residuals_at<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     t: f64,
     q: &[f64],
     v: &[f64],
-) -> f64 {
+) -> [f64; 3] {
     let m = model.constraint_count();
     if m == 0 {
-        return 0.0;
+        return [0.0; 3];
     }
     let mut g = DVector::zeros(m);
     let mut jac = DMatrix::zeros(m, N);
     let q = SVector::<f64, N>::from_column_slice(q);
     crate::model::general::constraint_jacobian_at(model, t, &q, g.as_mut_slice(), &mut jac);
     let gv = &jac * DVector::from_column_slice(v);
-    g.amax().max(gv.amax())
+    [g.amax(), gv.amax(), jac.amax()]
 }
 
-/// Checks that initial data lie on the constraints: `|g(q_0)| ≤ 10⁻¹⁰ (1 + |q_0|)` and
-/// `|G(q_0) v_0| ≤ 10⁻¹⁰ max(1, |G| |v_0|)` (max-norms), else
-/// [`Error::InconsistentInitialState`].
-pub(crate) fn check_constraints<M: ForcedLagrangian<N>, const N: usize>(
-    model: &M,
-    q: &[f64],
-    v: &[f64],
-) -> Result<(), Error> {
-    if model.constraint_count() == 0 {
-        return Ok(());
-    }
-    let (q, v) = (SVector::from_column_slice(q), SVector::from_column_slice(v));
-    let (g, gv, jac) = constraint_residuals(model, &q, &v);
-    let tol_q = CONSTRAINT_TOL * (1.0 + q.amax());
-    let tol_v = CONSTRAINT_TOL * (jac.amax() * v.amax()).max(1.0);
-    for (what, r, tol) in [
-        ("position", g.amax(), tol_q),
-        ("velocity", gv.amax(), tol_v),
-    ] {
+/// Checks that initial data lie on the constraints, from `[|g(q_0)|, |G(q_0) v_0|, |G|]`:
+/// `|g(q_0)| ≤ 10⁻¹⁰ (1 + |q_0|)` and `|G(q_0) v_0| ≤ 10⁻¹⁰ max(1, |G| |v_0|)` (max-norms),
+/// else [`Error::InconsistentInitialState`].
+pub(crate) fn check_constraints(q: &[f64], v: &[f64], [g, gv, jac]: [f64; 3]) -> Result<(), Error> {
+    let amax = |x: &[f64]| x.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+    let tol_q = CONSTRAINT_TOL * (1.0 + amax(q));
+    let tol_v = CONSTRAINT_TOL * (jac * amax(v)).max(1.0);
+    for (what, r, tol) in [("position", g, tol_q), ("velocity", gv, tol_v)] {
         if r.is_nan() || r > tol {
             return Err(Error::InconsistentInitialState {
                 what,
@@ -254,46 +244,79 @@ impl<const N: usize> InitialState<N> {
     /// `q` moved onto `g(q) = 0` by Gauss–Newton steps of least change
     /// (`q ← q − Gᵀ(GGᵀ)⁻¹ g`), then `v` projected onto `G v = 0` the same way. A typed error
     /// if the constraints are singular at `q` or the projection does not converge.
+    ///
+    /// A model whose sparse kernels evaluate its constraints
+    /// ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count)) is
+    /// projected on sparse storage, with the saddle-point matrix `[[I, Gᵀ], [G, 0]]`.
     pub fn projected<M: ForcedLagrangian<N>>(
         model: &M,
         q: [f64; N],
         v: [f64; N],
     ) -> Result<Self, Error> {
-        let (mut q, mut v) = (SVector::from(q), SVector::from(v));
-        let singular = Error::UnsupportedConstraints {
-            message: "the constraints are singular (G Gᵀ not invertible) at the initial state",
-        };
-        // Gauss–Newton to round-off (quadratic: a few steps), accepted within the check's
-        // tolerance if round-off stops it earlier.
-        let mut done = false;
-        for _ in 0..50 {
-            let (g, _, jac) = constraint_residuals(model, &q, &v);
-            if !(g.iter().all(|x| x.is_finite()) && jac.iter().all(|x| x.is_finite())) {
-                return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+        #[cfg(feature = "sparse")]
+        if let Some(node) = model.sparse_node() {
+            let m = model.constraint_count();
+            if m > 0 && node.sparse_constraint_count() == m {
+                let (mut q, mut v) = (q, v);
+                crate::sparse::constraints::project_initial(node, &mut q, &mut v)?;
+                return Ok(InitialState::from_velocity(q, v));
             }
-            let size = 1.0 + q.amax();
-            done = g.amax() <= 0.01 * CONSTRAINT_TOL * size;
-            if g.amax() <= 16.0 * f64::EPSILON * size * size {
-                break;
-            }
-            let y = (&jac * jac.transpose())
-                .lu()
-                .solve(&g)
-                .ok_or(singular.clone())?;
-            let dq = jac.transpose() * y;
-            q -= SVector::<f64, N>::from_column_slice(dq.as_slice());
         }
-        if !done {
-            let (g, _, _) = constraint_residuals(model, &q, &v);
-            return Err(Error::InconsistentInitialState {
-                what: "position",
-                residual: g.amax(),
-                tol: CONSTRAINT_TOL * (1.0 + q.amax()),
+        let stack = crate::model::general::constraint_stack_bytes::<N>();
+        if stack > crate::MAX_KERNEL_STACK {
+            return Err(Error::ModelTooLarge {
+                dof: N,
+                max_dof: crate::LinearPath::DENSE_MAX_DOF,
+                stack_bytes: stack,
+                max: crate::MAX_KERNEL_STACK,
             });
         }
-        let (_, gv, jac) = constraint_residuals(model, &q, &v);
-        let y = (&jac * jac.transpose()).lu().solve(&gv).ok_or(singular)?;
-        v -= SVector::<f64, N>::from_column_slice((jac.transpose() * y).as_slice());
-        Ok(InitialState::from_velocity(q.into(), v.into()))
+        crate::stack::with_stack(stack, || projected_dense(model, q, v))
     }
+}
+
+/// [`InitialState::projected`] with the general dual-number kernels.
+fn projected_dense<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: [f64; N],
+    v: [f64; N],
+) -> Result<InitialState<N>, Error> {
+    let (mut q, mut v) = (SVector::from(q), SVector::from(v));
+    let singular = Error::UnsupportedConstraints {
+        message: "the constraints are singular (G Gᵀ not invertible) at the initial state",
+    };
+    // Gauss–Newton to round-off (quadratic: a few steps), accepted within the check's
+    // tolerance if round-off stops it earlier.
+    let (mut done, mut last) = (false, f64::INFINITY);
+    for _ in 0..50 {
+        let (g, _, jac) = constraint_residuals(model, &q, &v);
+        if !(g.iter().all(|x| x.is_finite()) && jac.iter().all(|x| x.is_finite())) {
+            return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+        }
+        let size = 1.0 + q.amax();
+        done = g.amax() <= 0.01 * CONSTRAINT_TOL * size;
+        // Quadratic convergence until round-off stops it (a step that no longer halves `g`).
+        if g.amax() == 0.0 || (done && g.amax() > 0.5 * last) {
+            break;
+        }
+        last = g.amax();
+        let y = (&jac * jac.transpose())
+            .lu()
+            .solve(&g)
+            .ok_or(singular.clone())?;
+        let dq = jac.transpose() * y;
+        q -= SVector::<f64, N>::from_column_slice(dq.as_slice());
+    }
+    if !done {
+        let (g, _, _) = constraint_residuals(model, &q, &v);
+        return Err(Error::InconsistentInitialState {
+            what: "position",
+            residual: g.amax(),
+            tol: CONSTRAINT_TOL * (1.0 + q.amax()),
+        });
+    }
+    let (_, gv, jac) = constraint_residuals(model, &q, &v);
+    let y = (&jac * jac.transpose()).lu().solve(&gv).ok_or(singular)?;
+    v -= SVector::<f64, N>::from_column_slice((jac.transpose() * y).as_slice());
+    Ok(InitialState::from_velocity(q.into(), v.into()))
 }

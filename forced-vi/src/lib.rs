@@ -90,6 +90,7 @@ pub mod newton;
 mod scalar;
 pub mod scheme;
 pub mod sparse;
+mod stack;
 mod step_equations;
 pub mod stepper;
 pub mod trajectory;

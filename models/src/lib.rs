@@ -12,3 +12,4 @@
 pub mod handwritten;
 pub mod large;
 pub mod models;
+pub mod rigid_chain;

@@ -168,7 +168,7 @@ fn vector<const N: usize>(x: &[f64]) -> SVector<f64, N> {
 impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M, N> {
     #[inline(always)]
     fn layout(&self) -> Layout {
-        Layout::new(N, self.prob.scheme.stages() - 1, false)
+        Layout::new(N, self.prob.cons, self.prob.scheme.stages() - 1, false)
     }
 
     #[inline(always)]
@@ -362,6 +362,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     fn end_multipliers(&self) -> &[f64] {
         &self.mu
+    }
+
+    fn constraint_residuals(
+        &mut self,
+        (t, q, v): (f64, &[f64], &[f64]),
+    ) -> Result<[f64; 3], Error> {
+        Ok(crate::initial::constraint_residuals_at(
+            self.prob.model,
+            t,
+            q,
+            v,
+        ))
     }
 
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {

@@ -39,23 +39,43 @@ pub(crate) struct Layout {
     coordinate: usize,
     /// The distance between two stages of one coordinate.
     stage: usize,
+    /// A constrained model: where the multipliers `ŵ_j = h² λ_j` (`j = 0 … s − 2`) start,
+    /// after the increments, and their strides in the constraint and in `j`.
+    multipliers: usize,
+    constraint: usize,
+    point: usize,
 }
 
 impl Layout {
-    /// The layout of `n` coordinates and `s1` stages, the stages of a coordinate together
-    /// (`coordinate_major`) or the coordinates of a stage.
-    pub(crate) fn new(n: usize, s1: usize, coordinate_major: bool) -> Self {
+    /// The layout of `n` coordinates, `m` constraints and `s1` stages, the stages of a
+    /// coordinate (or a constraint) together (`coordinate_major`) or the coordinates of a
+    /// stage.
+    pub(crate) fn new(n: usize, m: usize, s1: usize, coordinate_major: bool) -> Self {
+        let multipliers = n * s1;
         if coordinate_major {
             Layout {
                 coordinate: s1,
                 stage: 1,
+                multipliers,
+                constraint: s1,
+                point: 1,
             }
         } else {
             Layout {
                 coordinate: 1,
                 stage: n,
+                multipliers,
+                constraint: 1,
+                point: m,
             }
         }
+    }
+
+    /// The index of the multiplier `ŵ_{j, k}` (control point `j = 0 … s − 2`, constraint
+    /// `k`).
+    #[inline(always)]
+    pub(crate) fn multiplier(&self, j: usize, k: usize) -> usize {
+        self.multipliers + k * self.constraint + j * self.point
     }
 
     /// The index of unknown `(m, a)`.
@@ -153,6 +173,9 @@ pub(crate) trait StepBackend {
     /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
     /// over the last solved step (DESIGN §11); `None` without constraints.
     fn constraint_impulse(&self) -> Option<&[f64]>;
+    /// A constrained model: `[|g|, |G v|, |G|]` (max-norms) at `at = (t, q, v)`; zeros
+    /// without constraints.
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error>;
     /// A constrained model: the multipliers at the end of the last solved step, as
     /// `h² λ_{s−1}` (the units of those of its earlier control points, which follow the
     /// increments in [`Self::z`]).
@@ -308,6 +331,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     }
     fn end_multipliers(&self) -> &[f64] {
         forward!(self, b => b.end_multipliers())
+    }
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
+        forward!(self, b => b.constraint_residuals(at))
     }
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         forward!(self, b => b.step_data())

@@ -4,9 +4,11 @@
 
 use super::{Layout, StepBackend, StepFailure};
 use crate::error::Error;
+use crate::error::NewtonFailure;
 use crate::model::{NodePattern, NodeSink, SparseNode};
 use crate::newton::{NewtonOptions, NewtonReport};
 use crate::scheme::Scheme;
+use crate::sparse::constraints::Saddle;
 use crate::sparse::equations::SparseStep;
 use crate::sparse::lu::SparseLu;
 use crate::sparse::newton::SparseNewton;
@@ -21,20 +23,33 @@ pub(crate) struct SparseBackend<'a> {
     /// The transposed step Jacobian's solver and where `J`'s values go in it, for
     /// adjoints (made on first use).
     adjoint: Option<(SparseLu, Vec<usize>)>,
+    /// A constrained model: the saddle-point solve at a step's end, the impulse of the
+    /// constraint forces over the last step and its end multipliers `h² λ_{s−1}` (as in
+    /// the dense backend).
+    saddle: Option<Saddle>,
+    impulse: Vec<f64>,
+    mu: Vec<f64>,
+    ptil: Vec<f64>,
 }
 
 impl<'a> SparseBackend<'a> {
-    /// Buffers for `node` and `scheme` on the recorded node `pattern`; with `constant_mass`
-    /// (the model's promise) the velocity solve factors `E` once.
+    /// Buffers for `node` and `scheme` on the recorded node `pattern` (and, for a
+    /// constrained model, the pattern of `G`); with `constant_mass` (the model's promise)
+    /// the velocity solve factors `E` once.
     pub(crate) fn new(
         node: &'a dyn SparseNode,
         scheme: &'a Scheme,
-        pattern: NodePattern,
+        (pattern, g_pattern): (NodePattern, Option<NodePattern>),
         newton: NewtonOptions,
         constant_mass: bool,
     ) -> Result<Self, Error> {
         let velocity = VelocitySolver::new(&pattern, constant_mass)?;
-        let mut prob = SparseStep::new(node, scheme, pattern);
+        let saddle = match &g_pattern {
+            Some(g) => Some(Saddle::new(&pattern, g)?),
+            None => None,
+        };
+        let (n, m) = (pattern.n(), g_pattern.as_ref().map_or(0, |g| g.n()));
+        let mut prob = SparseStep::new(node, scheme, pattern, g_pattern);
         let lu = SparseLu::new(
             prob.step_pattern.dim,
             std::mem::take(&mut prob.step_pattern.col_ptr),
@@ -49,14 +64,74 @@ impl<'a> SparseBackend<'a> {
             newton: SparseNewton::new(lu, newton),
             velocity,
             adjoint: None,
+            impulse: vec![0.0; if saddle.is_some() { n } else { 0 }],
+            ptil: vec![0.0; if saddle.is_some() { n } else { 0 }],
+            mu: vec![0.0; m],
+            saddle,
         })
+    }
+
+    /// The end of a constrained step (DESIGN §11), as the dense backend's `project`: the
+    /// multipliers `μ = λ_{s−1}` and the velocity with `L_v(q_{k+1}, v) + h b_{s−1} Gᵀ μ = p̃`
+    /// and `G v = 0`, then the impulse of the constraint forces over the step.
+    fn project(&mut self) -> Result<(), StepFailure> {
+        let (Some(saddle), Some(cons)) = (self.saddle.as_mut(), self.prob.cons.as_ref()) else {
+            return Ok(());
+        };
+        let prob = &self.prob;
+        let (sch, h, n) = (prob.scheme, prob.h, prob.n);
+        let (s, s1, m) = (sch.stages(), sch.stages() - 1, cons.m);
+        let nz = n * s1;
+        // p̃ = p_k + h Σ b_i (L_q + F)_i − Σ_{j < s−1} (b_j/h) G(x_j)ᵀ ŵ_j.
+        self.ptil.copy_from_slice(&prob.p0);
+        for (i, &bi) in sch.b().iter().enumerate() {
+            for (p, f) in self.ptil.iter_mut().zip(&prob.fq[i * n..(i + 1) * n]) {
+                *p += h * bi * f;
+            }
+        }
+        self.impulse.fill(0.0);
+        for j in 0..s1 {
+            let hb = sch.b()[j] / h;
+            for (e, (k, a)) in cons.pattern.entries().enumerate() {
+                self.impulse[a] += hb * cons.jac_at(j)[e] * self.z[nz + k * s1 + j];
+            }
+        }
+        for (p, i) in self.ptil.iter_mut().zip(&self.impulse) {
+            *p -= i;
+        }
+        // The velocity guess: the step polynomial's end slope.
+        for a in 0..n {
+            saddle.v[a] = (1..=s1)
+                .map(|mm| sch.end_slope(mm) / h * self.z[a * s1 + mm - 1])
+                .sum();
+        }
+        let g1 = cons.jac_at(s - 1);
+        let q1 = &prob.xs[(s - 1) * n..s * n];
+        saddle
+            .end_of_step(
+                prob.node,
+                &prob.pattern,
+                (&cons.pattern, g1),
+                (prob.t0 + h, q1, &self.ptil),
+            )
+            .map_err(StepFailure::Newton)?;
+        for (e, (k, a)) in cons.pattern.entries().enumerate() {
+            self.impulse[a] += g1[e] * saddle.mu[k];
+        }
+        // In the units of the step's unknowns: `ŵ = h² λ = h μ̂ / b_{s−1}`.
+        for (w, x) in self.mu.iter_mut().zip(&saddle.mu) {
+            *w = h * x / sch.b()[s - 1];
+        }
+        let _ = m;
+        Ok(())
     }
 }
 
 impl StepBackend for SparseBackend<'_> {
     #[inline(always)]
     fn layout(&self) -> Layout {
-        Layout::new(self.prob.n, self.prob.scheme.stages() - 1, true)
+        let m = self.prob.cons.as_ref().map_or(0, |c| c.m);
+        Layout::new(self.prob.n, m, self.prob.scheme.stages() - 1, true)
     }
 
     #[inline(always)]
@@ -87,13 +162,24 @@ impl StepBackend for SparseBackend<'_> {
         prob.q0.copy_from_slice(q0);
         prob.p0.copy_from_slice(p0);
         self.newton.invalidate();
-        self.newton.solve(prob, &mut self.z, scale).map_err(|f| {
-            if prob.outside {
-                StepFailure::OutsidePattern
-            } else {
-                StepFailure::Newton(f)
+        let solved = self.newton.solve(prob, &mut self.z, scale);
+        let outside = prob.outside;
+        match solved {
+            Ok(report) => {
+                self.project()?;
+                Ok(report)
             }
-        })
+            Err(_) if outside => Err(StepFailure::OutsidePattern),
+            // The one Newton iteration of the error estimate (`crate::control`) ends its
+            // step too, so that its momentum carries its constraint impulse.
+            Err(f @ NewtonFailure::MaxIterations { .. })
+                if self.saddle.is_some() && self.newton.options().max_iterations == 1 =>
+            {
+                self.project()?;
+                Err(StepFailure::Newton(f))
+            }
+            Err(f) => Err(StepFailure::Newton(f)),
+        }
     }
 
     #[inline(always)]
@@ -209,11 +295,19 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     fn constraint_impulse(&self) -> Option<&[f64]> {
-        None
+        self.saddle.is_some().then_some(&self.impulse[..])
     }
 
     fn end_multipliers(&self) -> &[f64] {
-        &[]
+        &self.mu
+    }
+
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
+        let prob = &mut self.prob;
+        match prob.cons.as_mut() {
+            Some(c) => c.residuals(prob.node, &prob.pattern, at),
+            None => Ok([0.0; 3]),
+        }
     }
 
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
@@ -234,16 +328,15 @@ impl StepBackend for SparseBackend<'_> {
     fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
         self.linearize()?;
         if self.adjoint.is_none() {
-            let t =
-                self.newton.lu().transposed().map_err(|_| {
-                    StepFailure::Newton(crate::error::NewtonFailure::SingularJacobian)
-                })?;
+            let t = self
+                .newton
+                .lu()
+                .transposed()
+                .map_err(|_| StepFailure::Newton(NewtonFailure::SingularJacobian))?;
             self.adjoint = Some(t);
         }
         let Some((lu_t, map)) = self.adjoint.as_mut() else {
-            return Err(StepFailure::Newton(
-                crate::error::NewtonFailure::SingularJacobian,
-            ));
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
         };
         self.newton.lu().fill_transposed(lu_t, map);
         lu_t.factor().map_err(StepFailure::Newton)

@@ -10,7 +10,11 @@ use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
 use crate::MAX_KERNEL_STACK;
 #[cfg(feature = "sparse")]
-use crate::{backend::SparseBackend, sparse::record_node_pattern};
+use crate::{
+    backend::SparseBackend,
+    model::NodePattern,
+    sparse::{record_constraint_patterns, record_node_pattern},
+};
 
 /// Which linear algebra a run uses: the dense backend with `N × N` node blocks, or the
 /// sparse backend of DESIGN §9 on the model's [`SparseNode`](crate::model::SparseNode)
@@ -85,15 +89,6 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     ) -> Result<Backend<'s, M, N>, Error> {
         if self.model.constraint_count() > 0 {
             check_constrained(self.model, scheme)?;
-            if self.linear_path == LinearPath::Sparse {
-                return Err(Error::UnsupportedConstraints {
-                    message: "a constrained model runs on the dense backend only",
-                });
-            }
-            check_dense::<M, N>()?;
-            return Ok(Backend::Dense(DenseBackend::new(
-                self.model, scheme, newton,
-            )));
         }
         #[cfg(feature = "sparse")]
         if let Some(backend) = self.sparse_backend(init, scheme, newton)? {
@@ -107,6 +102,17 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             });
         }
         check_dense::<M, N>()?;
+        if self.model.constraint_count() > 0 {
+            let stack = crate::model::general::constraint_stack_bytes::<N>();
+            if stack > MAX_KERNEL_STACK {
+                return Err(Error::ModelTooLarge {
+                    dof: N,
+                    max_dof: LinearPath::DENSE_MAX_DOF,
+                    stack_bytes: stack,
+                    max: MAX_KERNEL_STACK,
+                });
+            }
+        }
         Ok(Backend::Dense(DenseBackend::new(
             self.model, scheme, newton,
         )))
@@ -131,10 +137,34 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             (LinearPath::Auto, None) => return Ok(None),
             (_, Some(node)) => node,
         };
+        // A constrained model needs constraint kernels beside its node kernels.
+        let cons = self.model.constraint_count();
+        if cons > 0 && node.sparse_constraint_count() != cons {
+            return match self.linear_path {
+                LinearPath::Sparse => Err(Error::UnsupportedConstraints {
+                    message: "the model's sparse kernels do not evaluate its constraints \
+                              (SparseNode::sparse_constraint_count)",
+                }),
+                _ => Ok(None),
+            };
+        }
         // The pattern at the initial state (at `v = 0` for initial momenta).
-        let pattern = match init {
+        let q = match init {
+            InitialState::Velocity { q, .. } | InitialState::Momentum { q, .. } => q,
+        };
+        let mut pattern = match init {
             InitialState::Velocity { q, v } => record_node_pattern(node, 0.0, q, v)?,
             InitialState::Momentum { q, .. } => record_node_pattern(node, 0.0, q, &vec![0.0; N])?,
+        };
+        // The constraints' curvature adds to the diagonal node blocks: its entries join the
+        // node pattern.
+        let g_pattern = if cons > 0 {
+            let (g, curvature) = record_constraint_patterns(node, 0.0, q)?;
+            let pairs = pattern.entries().chain(curvature).collect();
+            pattern = NodePattern::from_pairs(N, pairs);
+            Some(g)
+        } else {
+            None
         };
         let fill = pattern.nnz() as f64 / (N as f64 * N as f64);
         match self.linear_path {
@@ -153,7 +183,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             _ => {}
         }
         let constant_mass = M::STRUCTURE.constant_mass;
-        SparseBackend::new(node, scheme, pattern, newton, constant_mass).map(Some)
+        SparseBackend::new(node, scheme, (pattern, g_pattern), newton, constant_mass).map(Some)
     }
 }
 

@@ -13,7 +13,7 @@ use crate::scalar::{lift, Scalar};
 
 mod sparse_node;
 
-pub use sparse_node::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
+pub use sparse_node::{Block, ConstraintSink, NodeBlocks, NodePattern, NodeSink, SparseNode};
 
 /// Which derivative blocks a model can have; the macro fills this in from the expressions.
 ///
@@ -396,6 +396,15 @@ pub mod general {
             q,
         );
         h
+    }
+
+    /// A bound on the stack that [`constraint_jacobian_at`] and [`constraint_curvature_at`]
+    /// need: arrays of `N` second-order dual numbers in `N` directions.
+    pub const fn constraint_stack_bytes<const N: usize>() -> usize {
+        let dual = std::mem::size_of::<Dual2SVec64<N>>();
+        N.saturating_mul(dual)
+            .saturating_mul(8)
+            .saturating_add(64 * 1024)
     }
 
     /// A bound on the stack that [`node_parameter_gradient_at`] needs.

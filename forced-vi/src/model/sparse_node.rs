@@ -24,6 +24,8 @@ pub enum Block {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct NodePattern {
     n: usize,
+    /// Columns: `n`, but for the `m × n` pattern of a constraint Jacobian.
+    width: usize,
     row_start: Vec<usize>,
     cols: Vec<usize>,
 }
@@ -33,8 +35,14 @@ impl NodePattern {
     ///
     /// Pairs outside `n × n` are dropped; [`NodePattern::from_pairs`]'s caller checks them
     /// with [`NodeSink::outside`] when it records.
-    pub fn from_pairs(n: usize, mut pairs: Vec<(usize, usize)>) -> NodePattern {
-        pairs.retain(|&(r, c)| r < n && c < n);
+    pub fn from_pairs(n: usize, pairs: Vec<(usize, usize)>) -> NodePattern {
+        NodePattern::rectangular(n, n, pairs)
+    }
+
+    /// The `rows × width` pattern of the `(row, col)` pairs, in any order and with repeats
+    /// (pairs outside are dropped): the pattern of a constraint Jacobian `G`.
+    pub fn rectangular(n: usize, width: usize, mut pairs: Vec<(usize, usize)>) -> NodePattern {
+        pairs.retain(|&(r, c)| r < n && c < width);
         pairs.sort_unstable();
         pairs.dedup();
         let mut row_start = vec![0; n + 1];
@@ -46,6 +54,7 @@ impl NodePattern {
         }
         NodePattern {
             n,
+            width,
             row_start,
             cols: pairs.into_iter().map(|(_, c)| c).collect(),
         }
@@ -54,6 +63,11 @@ impl NodePattern {
     /// Degrees of freedom.
     pub fn n(&self) -> usize {
         self.n
+    }
+
+    /// Columns (rows but for a rectangular pattern).
+    pub fn width(&self) -> usize {
+        self.width
     }
 
     /// Stored entries.
@@ -242,4 +256,159 @@ pub trait SparseNode {
 
     /// The Lagrangian `L(t, q, v)`, for the energy.
     fn lagrangian_value(&self, t: f64, q: &[f64], v: &[f64]) -> f64;
+
+    /// The number of holonomic constraints these kernels evaluate (DESIGN §11); none by
+    /// default. A constrained model runs on the sparse backend only if this equals its
+    /// [`ForcedLagrangian::constraint_count`](crate::ForcedLagrangian::constraint_count).
+    fn sparse_constraint_count(&self) -> usize {
+        0
+    }
+
+    /// Adds the constraints `g(t, q)` and, when [`ConstraintSink::wants_derivatives`], every
+    /// entry of `G = ∂g/∂q` and of each `∂²g_k/∂q²` that may be nonzero, into `sink`. The
+    /// entries added must not depend on `(t, q)`, and the values must equal
+    /// [`ForcedLagrangian::constraints`](crate::ForcedLagrangian::constraints).
+    fn eval_constraints(&self, t: f64, q: &[f64], sink: &mut ConstraintSink<'_>) {
+        let _ = (t, q, sink);
+    }
+}
+
+enum ConstraintTarget<'a> {
+    /// Values of `g` alone.
+    Values,
+    /// `g`, the entries of `G` on its pattern and the curvature `Σ_k λ_k ∂²g_k` on the node
+    /// pattern (with `lambda` empty, no curvature).
+    Jacobian {
+        g_pattern: &'a NodePattern,
+        g_values: &'a mut [f64],
+        node_pattern: &'a NodePattern,
+        lambda: &'a [f64],
+        curvature: &'a mut [f64],
+    },
+    /// Records which entries of `G` and of the curvature the kernel adds.
+    Record {
+        g_pairs: &'a mut Vec<(usize, usize)>,
+        curvature_pairs: &'a mut Vec<(usize, usize)>,
+    },
+}
+
+/// Receives what [`SparseNode::eval_constraints`] computes at one position: the values
+/// `g_k(t, q)`, accumulated into a zeroed vector, and, when asked for, the entries of
+/// `G = ∂g/∂q` and of the multipliers' curvature `Σ_k λ_k ∂²g_k/∂q²` (DESIGN §11).
+pub struct ConstraintSink<'a> {
+    g: &'a mut [f64],
+    target: ConstraintTarget<'a>,
+    outside: bool,
+}
+
+impl<'a> ConstraintSink<'a> {
+    /// A sink for the values `g` alone (zeroed here).
+    pub fn values(g: &'a mut [f64]) -> ConstraintSink<'a> {
+        g.iter_mut().for_each(|x| *x = 0.0);
+        ConstraintSink {
+            g,
+            target: ConstraintTarget::Values,
+            outside: false,
+        }
+    }
+
+    /// A sink for `g`, for `G` on `g_pattern` (an `m`-row pattern) and, weighted by
+    /// `lambda` (`m` values, or none to skip it), for the curvature on `node_pattern`.
+    /// Everything is zeroed here.
+    pub fn jacobian(
+        g: &'a mut [f64],
+        (g_pattern, g_values): (&'a NodePattern, &'a mut [f64]),
+        node_pattern: &'a NodePattern,
+        lambda: &'a [f64],
+        curvature: &'a mut [f64],
+    ) -> ConstraintSink<'a> {
+        g_values.iter_mut().for_each(|x| *x = 0.0);
+        curvature.iter_mut().for_each(|x| *x = 0.0);
+        let mut sink = ConstraintSink::values(g);
+        sink.target = ConstraintTarget::Jacobian {
+            g_pattern,
+            g_values,
+            node_pattern,
+            lambda,
+            curvature,
+        };
+        sink
+    }
+
+    /// A sink that records the entries of `G` and of the curvature that the kernel adds.
+    pub fn record(
+        g: &'a mut [f64],
+        g_pairs: &'a mut Vec<(usize, usize)>,
+        curvature_pairs: &'a mut Vec<(usize, usize)>,
+    ) -> ConstraintSink<'a> {
+        let mut sink = ConstraintSink::values(g);
+        sink.target = ConstraintTarget::Record {
+            g_pairs,
+            curvature_pairs,
+        };
+        sink
+    }
+
+    /// Whether the caller wants `G` and the curvature (otherwise
+    /// [`ConstraintSink::add_gradient`] and [`ConstraintSink::add_curvature`] may be skipped).
+    pub fn wants_derivatives(&self) -> bool {
+        !matches!(self.target, ConstraintTarget::Values)
+    }
+
+    /// Adds `x` to `g_k`.
+    #[inline]
+    pub fn add_value(&mut self, k: usize, x: f64) {
+        match self.g.get_mut(k) {
+            Some(slot) => *slot += x,
+            None => self.outside = true,
+        }
+    }
+
+    /// Adds `x` to `G[k, a] = ∂g_k/∂q_a`. As with [`NodeSink::add`], every entry that may be
+    /// nonzero is added, whatever the state.
+    #[inline]
+    pub fn add_gradient(&mut self, k: usize, a: usize, x: f64) {
+        match &mut self.target {
+            ConstraintTarget::Values => {}
+            ConstraintTarget::Record { g_pairs, .. } => g_pairs.push((k, a)),
+            ConstraintTarget::Jacobian {
+                g_pattern,
+                g_values,
+                ..
+            } => match g_pattern.position(k, a) {
+                Some(i) => g_values[i] += x,
+                None => self.outside = true,
+            },
+        }
+    }
+
+    /// Adds `x = ∂²g_k/∂q_a∂q_c` to the curvature, entry `(a, c)`, weighted by `λ_k`.
+    #[inline]
+    pub fn add_curvature(&mut self, k: usize, a: usize, c: usize, x: f64) {
+        match &mut self.target {
+            ConstraintTarget::Values => {}
+            ConstraintTarget::Record {
+                curvature_pairs, ..
+            } => curvature_pairs.push((a, c)),
+            ConstraintTarget::Jacobian {
+                node_pattern,
+                lambda,
+                curvature,
+                ..
+            } => {
+                if lambda.is_empty() {
+                    return;
+                }
+                match (node_pattern.position(a, c), lambda.get(k)) {
+                    (Some(i), Some(l)) => curvature[i] += l * x,
+                    _ => self.outside = true,
+                }
+            }
+        }
+    }
+
+    /// Whether the kernel wrote outside `m`, `n` or the recorded patterns.
+    pub fn outside(&self) -> bool {
+        self.outside
+    }
 }

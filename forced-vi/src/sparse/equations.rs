@@ -6,6 +6,7 @@
 use crate::error::NewtonFailure;
 use crate::model::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::scheme::Scheme;
+use crate::sparse::constraints::StepConstraints;
 use crate::sparse::newton::SparseSystem;
 use crate::sparse::pattern::StepPattern;
 
@@ -30,13 +31,26 @@ pub(crate) struct SparseStep<'a> {
     pub(crate) step_pattern: StepPattern,
     /// A kernel wrote outside the recorded pattern (a defect of the model).
     pub(crate) outside: bool,
+    /// Holonomic constraints (DESIGN §11), with their unknowns and rows after the
+    /// increments' (see [`StepPattern`]).
+    pub(crate) cons: Option<StepConstraints>,
+    /// Scratch: the multipliers of one control point.
+    lam: Vec<f64>,
 }
 
 impl<'a> SparseStep<'a> {
-    /// Buffers for `node` and `scheme` on a recorded pattern.
-    pub(crate) fn new(node: &'a dyn SparseNode, scheme: &'a Scheme, pattern: NodePattern) -> Self {
-        let (n, r) = (pattern.n(), scheme.quadrature_nodes());
-        let step_pattern = StepPattern::new(&pattern, scheme.stages());
+    /// Buffers for `node` and `scheme` on a recorded pattern; for a constrained model, with
+    /// the pattern of `G` (whose curvature entries the node pattern holds).
+    pub(crate) fn new(
+        node: &'a dyn SparseNode,
+        scheme: &'a Scheme,
+        pattern: NodePattern,
+        g_pattern: Option<NodePattern>,
+    ) -> Self {
+        let (n, r, s) = (pattern.n(), scheme.quadrature_nodes(), scheme.stages());
+        let step_pattern = StepPattern::new(&pattern, s, g_pattern.as_ref());
+        let cons = g_pattern.map(|g| StepConstraints::new(g, s, pattern.nnz()));
+        let lam = vec![0.0; cons.as_ref().map_or(0, |c| c.m)];
         SparseStep {
             node,
             scheme,
@@ -53,7 +67,59 @@ impl<'a> SparseStep<'a> {
             pattern,
             step_pattern,
             outside: false,
+            cons,
+            lam,
         }
+    }
+
+    /// The control point `j`'s position: `q_k` or quadrature node `j` (Lobatto schemes).
+    fn control_x(&self, j: usize) -> &[f64] {
+        let n = self.n;
+        if j == 0 {
+            &self.q0
+        } else {
+            &self.xs[j * n..(j + 1) * n]
+        }
+    }
+
+    /// `g` and `G` at every control point; with `curvature`, the curvature at control point
+    /// `j` (`1 ≤ j ≤ s − 2`) is added to the Jacobian `values` as each is evaluated.
+    fn eval_constraints(
+        &mut self,
+        z: &[f64],
+        mut values: Option<&mut [f64]>,
+    ) -> Result<(), NewtonFailure> {
+        let Some(mut cons) = self.cons.take() else {
+            return Ok(());
+        };
+        let (sch, n, h) = (self.scheme, self.n, self.h);
+        let (s, s1, m) = (sch.stages(), sch.stages() - 1, cons.m);
+        let nz = n * s1;
+        let mut out = Ok(());
+        for j in 0..s {
+            let t = self.t0 + sch.c()[j] * h;
+            let curv = values.is_some() && j >= 1 && j + 1 < s;
+            if curv {
+                for k in 0..m {
+                    self.lam[k] = z[nz + k * s1 + j];
+                }
+            }
+            let lam: &[f64] = if curv { &self.lam } else { &[] };
+            let x = self.control_x(j);
+            if let Err(e) = cons.eval(self.node, &self.pattern, (j, t, x), lam) {
+                out = Err(e);
+                break;
+            }
+            if let (true, Some(vals)) = (curv, values.as_deref_mut()) {
+                let hb = sch.b()[j] / h;
+                let base = &self.step_pattern.base;
+                for (k, c) in cons.curvature.iter().enumerate() {
+                    vals[base[k * s1 + j - 1] + j] -= hb * c;
+                }
+            }
+        }
+        self.cons = Some(cons);
+        out
     }
 
     /// The node positions and velocities of the step polynomial with increments `z`.
@@ -128,6 +194,24 @@ impl SparseSystem for SparseStep<'_> {
                 r[a * s1 + j] = g;
             }
         }
+        if self.cons.is_some() {
+            self.eval_constraints(z, None)?;
+            let Some(cons) = &self.cons else {
+                return Ok(());
+            };
+            let (m, nz) = (cons.m, n * s1);
+            for j in 0..s1 {
+                // `−h b_j G(x_j)ᵀ λ_j = −(b_j/h) G(x_j)ᵀ ŵ_j` in the gradient rows.
+                let hb = sch.b()[j] / h;
+                for (e, (k, a)) in cons.pattern.entries().enumerate() {
+                    r[a * s1 + j] -= hb * cons.jac_at(j)[e] * z[nz + k * s1 + j];
+                }
+                // The rows `g(x_{j+1})`.
+                for k in 0..m {
+                    r[nz + k * s1 + j] = cons.g_at(j + 1)[k];
+                }
+            }
+        }
         Ok(())
     }
 
@@ -143,6 +227,21 @@ impl SparseSystem for SparseStep<'_> {
             for k in 0..self.pattern.nnz() {
                 let x = ca * blk.a[k] + cb * blk.b[k] + cc * blk.c[k] + ce * blk.e[k];
                 values[base[k * s1 + t.m - 1] + t.j] += x;
+            }
+        }
+        if self.cons.is_some() {
+            self.eval_constraints(z, Some(values))?;
+            let Some(cons) = &self.cons else {
+                return Ok(());
+            };
+            let sp = &self.step_pattern;
+            for j in 0..s1 {
+                let hb = self.scheme.b()[j] / h;
+                let (gt, g) = (cons.jac_at(j), cons.jac_at(j + 1));
+                for e in 0..cons.pattern.nnz() {
+                    values[sp.g_cols[e * s1 + j]] = -hb * gt[e];
+                    values[sp.g_rows[e * s1 + j]] = g[e];
+                }
             }
         }
         Ok(())

@@ -16,7 +16,10 @@
 //! | a sparse LU on a fixed pattern, allocation-free per factorisation, backed by faer's | `lu`, `supernodal` |
 //! | the Newton iteration's sparse linear solver | `newton` |
 //! | the velocity solve `L_v(q, v) = p` | `velocity` |
+//! | holonomic constraints: `g`, `G`, the curvature, the saddle-point solve (DESIGN §11) | `constraints` |
 
+#[cfg(feature = "sparse")]
+pub(crate) mod constraints;
 #[cfg(feature = "sparse")]
 pub(crate) mod equations;
 #[cfg(feature = "sparse")]
@@ -30,6 +33,8 @@ mod supernodal;
 #[cfg(feature = "sparse")]
 pub(crate) mod velocity;
 
-pub use crate::model::{Block, NodeBlocks, NodePattern, NodeSink, SparseNode};
+pub use crate::model::{Block, ConstraintSink, NodeBlocks, NodePattern, NodeSink, SparseNode};
+#[cfg(feature = "sparse")]
+pub(crate) use constraints::record_constraint_patterns;
 #[cfg(feature = "sparse")]
 pub(crate) use pattern::record_node_pattern;

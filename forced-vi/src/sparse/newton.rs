@@ -54,6 +54,11 @@ impl SparseNewton {
         }
     }
 
+    /// The options in use.
+    pub(crate) fn options(&self) -> &NewtonOptions {
+        &self.iteration.opts
+    }
+
     /// Forgets the factors.
     pub(crate) fn invalidate(&mut self) {
         self.iteration.have_factors = false;

@@ -55,9 +55,9 @@ pub(crate) struct Transposed {
     pub(crate) csc_of: Vec<usize>,
 }
 
-/// The node pattern in compressed columns (rows sorted within each column).
+/// A pattern in compressed columns (rows sorted within each column).
 pub(crate) fn transpose(pattern: &NodePattern) -> Transposed {
-    let n = pattern.n();
+    let n = pattern.width();
     let mut col_ptr = vec![0usize; n + 1];
     for (_, c) in pattern.entries() {
         col_ptr[c + 1] += 1;
@@ -82,40 +82,84 @@ pub(crate) fn transpose(pattern: &NodePattern) -> Transposed {
 }
 
 /// The step Jacobian's pattern for `s` control points.
+///
+/// A constrained model (DESIGN §11) adds `m (s − 1)` unknowns after the increments, the
+/// multipliers `ŵ_j = h² λ_j` (`j = 0 … s − 2`), unknown `(k, j)` at `n (s − 1) + k (s − 1) + j`,
+/// and as many rows, `g_k(x_j)` (`j = 1 … s − 1`) at `n (s − 1) + k (s − 1) + j − 1`.
 pub(crate) struct StepPattern {
-    /// Unknowns: `n (s − 1)`.
+    /// Unknowns: `(n + m)(s − 1)`.
     pub(crate) dim: usize,
     pub(crate) col_ptr: Vec<usize>,
     pub(crate) row_idx: Vec<usize>,
     /// `base[k (s − 1) + m − 1]`: where node entry `k = (a, b)` puts its row `(a, 0)` in
     /// column `(b, m)`; row `(a, j)` follows at `+ j`.
     pub(crate) base: Vec<usize>,
+    /// `g_rows[e (s − 1) + m − 1]`: where entry `e = (k, b)` of `G(x_m)` sits, in row
+    /// `g_k(x_m)` of column `(b, m)`.
+    pub(crate) g_rows: Vec<usize>,
+    /// `g_cols[e (s − 1) + j]`: where entry `e = (k, a)` of `G(x_j)ᵀ` sits, in row `(a, j)`
+    /// of the multiplier column `(k, j)`.
+    pub(crate) g_cols: Vec<usize>,
 }
 
 impl StepPattern {
-    /// The pattern of `∂G_j/∂x_m` for every node entry and every `j`, `m`.
-    pub(crate) fn new(pattern: &NodePattern, s: usize) -> StepPattern {
+    /// The pattern of `∂G_j/∂x_m` for every node entry and every `j`, `m`; with the
+    /// constraint Jacobian's pattern `g` (`m × n`), the constraint rows and columns too.
+    pub(crate) fn new(pattern: &NodePattern, s: usize, g: Option<&NodePattern>) -> StepPattern {
         let (n, s1) = (pattern.n(), s.saturating_sub(1).max(1));
+        let m = g.map_or(0, |g| g.n());
         let tr = transpose(pattern);
-        let dim = n * s1;
-        let nnz = pattern.nnz() * s1 * s1;
+        let g_tr = g.map(transpose);
+        let g_nnz = g.map_or(0, |g| g.nnz());
+        let nz = n * s1;
+        let dim = (n + m) * s1;
+        let nnz = (pattern.nnz() * s1 + 2 * g_nnz) * s1;
         let mut col_ptr = Vec::with_capacity(dim + 1);
         let mut row_idx = Vec::with_capacity(nnz);
         let mut base = vec![0usize; pattern.nnz() * s1];
+        let mut g_rows = vec![0usize; g_nnz * s1];
+        let mut g_cols = vec![0usize; g_nnz * s1];
         // CSR index of each CSC entry, to find `k` from a column walk.
-        let mut csr_of = vec![0usize; pattern.nnz()];
-        for (k, &p) in tr.csc_of.iter().enumerate() {
-            csr_of[p] = k;
-        }
+        let csr_of = |t: &Transposed| {
+            let mut out = vec![0usize; t.csc_of.len()];
+            for (k, &p) in t.csc_of.iter().enumerate() {
+                out[p] = k;
+            }
+            out
+        };
+        let node_csr = csr_of(&tr);
+        let g_csr = g_tr.as_ref().map(csr_of).unwrap_or_default();
         col_ptr.push(0);
         for b in 0..n {
-            for m in 0..s1 {
+            for mm in 0..s1 {
                 let range = tr.col_ptr[b]..tr.col_ptr[b + 1];
-                for (&a, &k) in tr.row_idx[range.clone()].iter().zip(&csr_of[range]) {
-                    base[k * s1 + m] = row_idx.len();
+                for (&a, &k) in tr.row_idx[range.clone()].iter().zip(&node_csr[range]) {
+                    base[k * s1 + mm] = row_idx.len();
                     row_idx.extend((0..s1).map(|j| a * s1 + j));
                 }
+                // The constraint rows `g_k(x_{mm+1})`, which read `x_{mm+1}` alone.
+                if let Some(gt) = &g_tr {
+                    let range = gt.col_ptr[b]..gt.col_ptr[b + 1];
+                    for (&k, &e) in gt.row_idx[range.clone()].iter().zip(&g_csr[range]) {
+                        g_rows[e * s1 + mm] = row_idx.len();
+                        row_idx.push(nz + k * s1 + mm);
+                    }
+                }
                 col_ptr.push(row_idx.len());
+            }
+        }
+        if let Some(g) = g {
+            let mut e = 0;
+            for k in 0..m {
+                let cols = g.row(k);
+                for j in 0..s1 {
+                    for (i, &a) in cols.iter().enumerate() {
+                        g_cols[(e + i) * s1 + j] = row_idx.len();
+                        row_idx.push(a * s1 + j);
+                    }
+                    col_ptr.push(row_idx.len());
+                }
+                e += cols.len();
             }
         }
         StepPattern {
@@ -123,6 +167,8 @@ impl StepPattern {
             col_ptr,
             row_idx,
             base,
+            g_rows,
+            g_cols,
         }
     }
 }
@@ -138,7 +184,7 @@ mod tests {
             .flat_map(|a| [(a, a), (a, a.saturating_sub(1)), (a, (a + 1).min(n - 1))])
             .collect();
         let node = NodePattern::from_pairs(n, pairs);
-        let sp = StepPattern::new(&node, 3);
+        let sp = StepPattern::new(&node, 3, None);
         assert_eq!(sp.dim, 10);
         assert_eq!(sp.row_idx.len(), node.nnz() * 4);
         for c in 0..sp.dim {

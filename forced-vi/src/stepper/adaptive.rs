@@ -110,12 +110,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 for k in 0..cons {
                     let at = |m: usize| {
                         if m + 1 < s {
-                            z[s1 * N + m * cons + k]
+                            z[lay.multiplier(m, k)]
                         } else {
                             mu.get(k).copied().unwrap_or(0.0)
                         }
                     };
-                    zr[r1 * N + j * cons + k] = (0..s).map(|m| row[m] * at(m)).sum();
+                    zr[lay_r.multiplier(j, k)] = (0..s).map(|m| row[m] * at(m)).sum();
                 }
             }
         }

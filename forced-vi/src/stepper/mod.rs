@@ -101,29 +101,32 @@ pub(crate) struct RunSetup<'a, M, const N: usize> {
 /// The stack a step of the model needs, in bytes: on the dense backend, the node kernels'
 /// own ([`ForcedLagrangian::KERNEL_STACK_BYTES`]) and a few `N × N` node blocks, which the
 /// kernels return by value; on either, a few records of `N`-vectors.
-pub(crate) const fn step_stack_bytes<M: ForcedLagrangian<N>, const N: usize>(dense: bool) -> usize {
+/// A constrained model on the dense backend needs the general constraint kernels' stack
+/// too ([`crate::model::general::constraint_stack_bytes`]).
+pub(crate) const fn step_stack_bytes<M: ForcedLagrangian<N>, const N: usize>(
+    dense: bool,
+    constrained: bool,
+) -> usize {
     let records = 16 * std::mem::size_of::<StepRecord<N>>() + 256 * 1024;
     if dense {
         let blocks = 8 * std::mem::size_of::<NodeJacobian<N>>();
-        records
-            .saturating_add(blocks)
-            .saturating_add(M::KERNEL_STACK_BYTES)
+        let kernels = if constrained {
+            let c = crate::model::general::constraint_stack_bytes::<N>();
+            if c > M::KERNEL_STACK_BYTES {
+                c
+            } else {
+                M::KERNEL_STACK_BYTES
+            }
+        } else {
+            M::KERNEL_STACK_BYTES
+        };
+        records.saturating_add(blocks).saturating_add(kernels)
     } else {
         records
     }
 }
 
-/// Runs `f` on a stack with `need` bytes to spare: the caller's own stack when it has them,
-/// else a fresh one on the heap (`stacker`), so that no model size overflows a thread's
-/// stack, whichever thread runs it.
-#[inline]
-pub(crate) fn with_stack<R>(need: usize, f: impl FnOnce() -> R) -> R {
-    if need <= 256 * 1024 {
-        f()
-    } else {
-        stacker::maybe_grow(need, need.saturating_mul(2), f)
-    }
-}
+pub(crate) use crate::stack::with_stack;
 
 /// Steps a model through time; an iterator over [`StepRecord`]s, initial state first.
 ///
@@ -217,7 +220,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
 
     /// The record of the current state; with `diagnostics`, its energy and balance too
     /// (else zero, and `v` is the step polynomial's end slope in a lean run).
-    fn record(
+    fn record_state(
         &self,
         newton_iterations: usize,
         residual: f64,
@@ -244,12 +247,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             substeps,
             error_estimate: self.estimate,
             constraint_force: SVector::from_column_slice(&self.cforce),
-            constraint_residual: if diagnostics {
-                crate::initial::constraint_residual(self.model, self.t, &st.q.sum, &st.v)
-            } else {
-                0.0
-            },
+            constraint_residual: 0.0,
         }
+    }
+
+    /// [`Self::record_state`], with the constraint residual `max(|g|, |G v|)` among the
+    /// diagnostics.
+    fn record(
+        &mut self,
+        newton_iterations: usize,
+        residual: f64,
+        substeps: usize,
+        diagnostics: bool,
+    ) -> StepRecord<N> {
+        let mut rec = self.record_state(newton_iterations, residual, substeps, diagnostics);
+        if diagnostics && self.model.constraint_count() > 0 {
+            let st = &self.state;
+            let at = (self.t, &st.q.sum[..], &st.v[..]);
+            rec.constraint_residual = match self.backend.constraint_residuals(at) {
+                Ok([g, gv, _]) => g.max(gv),
+                Err(_) => f64::NAN,
+            };
+        }
+        rec
     }
 
     /// Leaves out the per-step diagnostics (velocity solve, energy, work, balance): the
@@ -286,7 +306,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     pub(crate) fn failure(&self, error: Error) -> RunFailure<N> {
         let last = self
             .started
-            .then(|| Box::new(self.record(0, 0.0, 1, false)));
+            .then(|| Box::new(self.record_state(0, 0.0, 1, false)));
         RunFailure::after(error, self.stats, last)
     }
 

@@ -21,7 +21,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Self, Error> {
-        let stack = step_stack_bytes::<M, N>(backend.deep_stack());
+        let constrained = setup.model.constraint_count() > 0;
+        let stack = step_stack_bytes::<M, N>(backend.deep_stack(), constrained);
         let auto = setup.auto_first_step;
         with_stack(stack, || {
             let mut stepper = Self::start(setup, backend, reference, init, t_final, stack)?;
@@ -76,7 +77,11 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         };
         let mut state = State::new(N, backend.z().len());
         let mass_sign = initial_state(&mut backend, &mut state, init)?;
-        crate::initial::check_constraints(model, &state.q.sum, &state.v)?;
+        if model.constraint_count() > 0 {
+            let at = (0.0, &state.q.sum[..], &state.v[..]);
+            let residuals = backend.constraint_residuals(at)?;
+            crate::initial::check_constraints(&state.q.sum, &state.v, residuals)?;
+        }
         check_time_flag(model, &state.q.sum, &state.v)?;
         let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
         let energy0 = energy(model, 0.0, q0, v0, p0)
