@@ -139,11 +139,11 @@ mod report_plan {
     #[test]
     fn step_sizes_cover_the_range_and_land_on_t() {
         let p = Plan::full();
-        let hs = p.step_sizes(1.0);
+        let hs = p.step_sizes(1.0, 4);
         assert_eq!(hs[0], 1.0);
         assert!((hs.last().unwrap() - 5e-5).abs() < 1e-18);
         assert!(hs.windows(2).all(|w| w[1] < w[0]));
-        for h in p.step_sizes(20.0) {
+        for h in p.step_sizes(20.0, 4) {
             let n = 20.0 / h;
             assert!((n - n.round()).abs() < 1e-9 && h <= 1.0);
         }

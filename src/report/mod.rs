@@ -96,6 +96,15 @@ impl Method {
         v
     }
 
+    /// The higher orders the full report adds to [`Method::defaults`]: `lobatto6` and
+    /// `lobatto7` (orders 10 and 12), whose fits need the full grids (see
+    /// [`plan::Plan::step_sizes`]).
+    pub fn high_orders() -> Vec<Method> {
+        (6..=7)
+            .map(|s| Method::Variational(SchemeId::Lobatto(s)))
+            .collect()
+    }
+
     /// Whether this is a variational scheme.
     pub fn is_variational(&self) -> bool {
         matches!(self, Method::Variational(_))

@@ -16,7 +16,9 @@
 //!    more, above [`FLOOR`]); the first point of the scatter, and every smaller `h`, drop
 //!    out. (Eight steps per decade shrink an order-2 error by 1.78 per point.) The rule
 //!    looks only at errors within [`FLOOR_BAND`] `= 10³` of the sweep's smallest, where a
-//!    floor can be; a bump at large `h` is pre-asymptotic and left to step 3.
+//!    floor can be, and only at points whose every smaller `h` is within that band too (the
+//!    floor is the tail of the sweep); a bump at larger `h` is pre-asymptotic and left to
+//!    step 3.
 //! 2. **Seed.** The [`MIN_POINTS`] `= 3` candidates with the smallest `h` start the fit.
 //! 3. **Grow.** The next larger `h` joins while the slope of the segment from it to the fit's
 //!    largest-`h` point is within [`TRIM`] `= 0.3` of the seed's slope; the first point that
@@ -84,7 +86,11 @@ pub fn observed_order(points: &[(f64, f64)], scale: f64) -> Option<Fit> {
     let mut below = 0.0f64;
     let mut falling = vec![false; pts.len()];
     for (i, &(_, e)) in pts.iter().enumerate() {
-        falling[i] = below <= FALL * e || e > FLOOR_BAND * least;
+        // The scatter is the floor's only if every smaller `h` is near the floor too: a
+        // wiggle above an asymptotic range that reaches the floor (high orders cross the fit's
+        // window within a few tenths of a decade of `h`) is pre-asymptotic, not round-off.
+        let tail_near_floor = below <= FLOOR_BAND * least;
+        falling[i] = below <= FALL * e || e > FLOOR_BAND * least || !tail_near_floor;
         below = below.max(e);
     }
     let first = falling.iter().rposition(|&f| !f).map_or(0, |i| i + 1);

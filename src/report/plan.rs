@@ -45,6 +45,9 @@ pub struct Plan {
     pub long_run_samples: usize,
 }
 
+/// Points per decade of `h`, per unit of order, for schemes above order 8.
+pub const HIGH_ORDER_POINTS: f64 = 4.0;
+
 /// Schemes of order 2 (`lobatto2`, `midpoint`) are run adaptively down to this tolerance only.
 pub const ORDER2_TOL_FLOOR: f64 = 1e-9;
 
@@ -104,15 +107,26 @@ impl Plan {
         }
     }
 
-    /// Step sizes `T/n`, largest first, from `h = min(1, T)` down to [`h_min`](Self::h_min).
-    pub fn step_sizes(&self, t_final: f64) -> Vec<f64> {
+    /// Step sizes `T/n`, largest first, from `h = min(1, T)` down to [`h_min`](Self::h_min),
+    /// for a scheme of order `order`.
+    ///
+    /// Above order 8 the grid is [`HIGH_ORDER_POINTS`] `· order` points per decade: an
+    /// order-`p` error crosses the fit's window (`10⁻¹³ … 10⁻³`, ten decades) within about
+    /// `10/p` decades of `h`, where [`Plan::per_decade`] would leave too few points to fit
+    /// (the sweep stops at the round-off floor, so the denser grid costs little).
+    pub fn step_sizes(&self, t_final: f64, order: usize) -> Vec<f64> {
+        let per_decade = if order > 8 {
+            self.per_decade.max(HIGH_ORDER_POINTS * order as f64)
+        } else {
+            self.per_decade
+        };
         let n_min = (t_final / 1.0).ceil().max(1.0);
         let n_max = (t_final / self.h_min).floor().max(n_min);
         let decades = (n_max / n_min).log10();
-        let points = (decades * self.per_decade).round() as usize;
+        let points = (decades * per_decade).round() as usize;
         let mut ns: Vec<u64> = (0..=points)
             .map(|k| {
-                let x = n_min * 10f64.powf(k as f64 / self.per_decade);
+                let x = n_min * 10f64.powf(k as f64 / per_decade);
                 x.round().clamp(n_min, n_max) as u64
             })
             .collect();

@@ -148,6 +148,38 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         Ok(integ)
     }
 
+    /// An adaptive integrator that chooses its order too: the Lobatto scheme of
+    /// [`Scheme::for_tolerance`] for the tighter of `rtol` and `atol` (the positive one if the
+    /// other is zero) on the backend the model will take ([`LinearPath::Auto`]: the sparse
+    /// one for a model with sparse kernels and at least [`LinearPath::SPARSE_MIN_DOF`]
+    /// coordinates), then as [`Self::adaptive`].
+    ///
+    /// ```
+    /// use forced_vi::prelude::*;
+    /// # struct Oscillator;
+    /// # impl ForcedLagrangian<1> for Oscillator {
+    /// #     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+    /// #         (v[0] * v[0] - q[0] * q[0]) * 0.5
+    /// #     }
+    /// # }
+    /// let integrator = Integrator::auto(&Oscillator, 1e-10, 1e-10)?;
+    /// assert_eq!(integrator.scheme().order(), 12);
+    /// let end = integrator
+    ///     .final_state(InitialState::from_velocity([1.0], [0.0]), 10.0)
+    ///     .map_err(|f| f.error)?;
+    /// assert!((end.q[0] - 10f64.cos()).abs() < 1e-9);
+    /// # Ok::<(), forced_vi::Error>(())
+    /// ```
+    pub fn auto(model: &'m M, rtol: f64, atol: f64) -> Result<Self, Error> {
+        let tol = match (rtol > 0.0, atol > 0.0) {
+            (true, true) => rtol.min(atol),
+            (true, false) => rtol,
+            _ => atol,
+        };
+        let sparse = N >= LinearPath::SPARSE_MIN_DOF && model.sparse_node().is_some();
+        Self::adaptive(model, Scheme::for_tolerance(tol, sparse), rtol, atol)
+    }
+
     /// Replaces the Newton options.
     #[must_use]
     pub fn newton(mut self, newton: NewtonOptions) -> Self {

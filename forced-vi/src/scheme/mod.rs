@@ -122,6 +122,31 @@ impl Scheme {
         Self::new(SchemeId::Lobatto(s))
     }
 
+    /// The Lobatto scheme an adaptive run at tolerance `tol` should use: the number of stages
+    /// that was cheapest in the report's adaptive work-precision sweeps (`report/`, error
+    /// within the tolerance, median run time), by backend.
+    ///
+    /// | `tol` | dense backend (small models) | sparse backend (large models) |
+    /// |---|---|---|
+    /// | above `10⁻⁶` | `lobatto5` (order 8) | `lobatto3` (order 4) |
+    /// | `10⁻⁶` to above `10⁻⁹` | `lobatto6` (order 10) | `lobatto4` (order 6) |
+    /// | `10⁻⁹` and below | `lobatto7` (order 12) | `lobatto4` |
+    ///
+    /// On the dense backend a stage costs little next to a step, so the higher order wins at
+    /// every tolerance the report sweeps; on the sparse backend the LU's fill grows with the
+    /// stages. A tolerance that is not finite or not positive gets `lobatto5`.
+    /// [`crate::Integrator::auto`] applies it.
+    pub fn for_tolerance(tol: f64, sparse: bool) -> Self {
+        let s = match (sparse, tol) {
+            (true, t) if t > 1e-6 => 3,
+            (true, _) => 4,
+            (false, t) if t.is_nan() || t > 1e-6 => 5,
+            (false, t) if t > 1e-9 => 6,
+            (false, _) => 7,
+        };
+        Self::new(SchemeId::Lobatto(s)).unwrap_or_else(|_| Self::midpoint())
+    }
+
     /// The midpoint rule.
     pub fn midpoint() -> Self {
         Self::from_coefficients(SchemeId::Midpoint, vec![0.0, 1.0], vec![0.5], vec![1.0])

@@ -113,3 +113,18 @@ fn ids_round_trip() {
     assert!("alpha(1.5)".parse::<SchemeId>().is_err());
     assert!("rk4".parse::<SchemeId>().is_err());
 }
+
+#[test]
+fn the_order_follows_the_tolerance_and_the_backend() {
+    let stages = |tol, sparse| match Scheme::for_tolerance(tol, sparse).id() {
+        SchemeId::Lobatto(s) => s,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(stages(1e-3, false), 5);
+    assert_eq!(stages(1e-7, false), 6);
+    assert_eq!(stages(1e-9, false), 7);
+    assert_eq!(stages(1e-12, false), 7);
+    assert_eq!(stages(f64::NAN, false), 5);
+    assert_eq!(stages(1e-4, true), 3);
+    assert_eq!(stages(1e-8, true), 4);
+}

@@ -92,7 +92,11 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
         .filter(|s| study::selected(&opts.scenes, s.name()))
         .collect();
     let methods = if opts.methods.is_empty() {
-        Method::defaults()
+        let mut m = Method::defaults();
+        if !opts.quick {
+            m.extend(Method::high_orders());
+        }
+        m
     } else {
         opts.methods.clone()
     };

@@ -162,7 +162,10 @@ fn measure(
 /// schemes stop at [`ORDER2_TOL_FLOOR`] in adaptive mode).
 pub fn grid(plan: &Plan, scene: &dyn Scene, method: &Method, mode: Mode) -> Vec<f64> {
     match (method, mode) {
-        (Method::Variational(_), Mode::Fixed) => plan.step_sizes(scene.t_final()),
+        (Method::Variational(_), Mode::Fixed) => {
+            let order = method.scheme().map_or(0, |s| s.order());
+            plan.step_sizes(scene.t_final(), order)
+        }
         (Method::Variational(_), Mode::Adaptive) => {
             let order = method.scheme().map_or(0, |s| s.order());
             let floor = if order <= 2 { ORDER2_TOL_FLOOR } else { 0.0 };

@@ -1,0 +1,179 @@
+//! The order chosen from the tolerance (`Integrator::auto`, `Scheme::for_tolerance`) against
+//! every fixed choice: `cargo run --release --example auto_order`.
+//!
+//! On three of the report's models and three models the rule was not tuned on, each adaptive
+//! Lobatto scheme (s = 3 … 7) and `auto` run at `rtol = atol = tol` for tol = 1e-4, 1e-7 and
+//! 1e-10. Each run is timed (median of 7) and its final `(q, p)` compared with a reference
+//! (fixed-step lobatto5 at `T/40000`, below 1e-13 on these models). The last column is the
+//! time of `auto` over the cheapest scheme whose error is within 10·tol: 1.00 means the rule
+//! picked the cheapest one.
+use std::time::Instant;
+
+use forced_vi::prelude::*;
+use forced_vi_scenes::models::{CoupledVanDerPol, DoublePendulumFriction, KeplerDrag};
+
+/// Hénon–Heiles with linear drag (held out).
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 0.5 * (x * x + y * y)
+        - (x * x * y - y * y * y / 3.0),
+    force(x = -c * x_dot, y = -c * y_dot),
+)]
+struct HenonHeiles {
+    c: f64,
+}
+
+/// An elastic pendulum in polar coordinates with drag on both (held out).
+#[forced_lagrangian(
+    coordinates(r, th),
+    lagrangian = 0.5 * (r_dot * r_dot + r * r * th_dot * th_dot) + g * r * th.cos()
+        - 0.5 * k * (r - 1.0) * (r - 1.0),
+    force(r = -c * r_dot, th = -c * r * r * th_dot),
+)]
+struct ElasticPendulum {
+    g: f64,
+    k: f64,
+    c: f64,
+}
+
+/// A damped pendulum driven by a periodic torque (held out; non-autonomous).
+#[forced_lagrangian(
+    coordinates(th),
+    lagrangian = 0.5 * th_dot * th_dot + th.cos(),
+    force(th = -c * th_dot + a * (w * t).cos()),
+)]
+struct DrivenPendulum {
+    c: f64,
+    a: f64,
+    w: f64,
+}
+
+const TOLS: [f64; 3] = [1e-4, 1e-7, 1e-10];
+
+fn median_seconds(mut f: impl FnMut()) -> f64 {
+    let mut times: Vec<f64> = (0..7)
+        .map(|_| {
+            let t0 = Instant::now();
+            f();
+            t0.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[3]
+}
+
+fn measure<M: ForcedLagrangian<N> + Sync, const N: usize>(
+    name: &str,
+    model: &M,
+    init: InitialState<N>,
+    t_final: f64,
+) -> Result<Vec<f64>, forced_vi::Error> {
+    let reference = Integrator::new(model, Scheme::lobatto(5)?, t_final / 40000.0)?
+        .final_state(init, t_final)
+        .map_err(|f| f.error)?;
+    let err = |q: &[f64], p: &[f64]| {
+        let dq = q.iter().zip(reference.q.iter()).map(|(a, b)| (a - b).abs());
+        let dp = p.iter().zip(reference.p.iter()).map(|(a, b)| (a - b).abs());
+        dq.chain(dp).fold(0.0, f64::max)
+    };
+    let mut ratios = Vec::new();
+    for tol in TOLS {
+        let mut cells = Vec::new();
+        let mut best = f64::INFINITY;
+        for s in 3..=7 {
+            let integ = Integrator::adaptive(model, Scheme::lobatto(s)?, tol, tol)?;
+            let end = integ.final_state(init, t_final).map_err(|f| f.error)?;
+            let e = err(end.q.as_slice(), end.p.as_slice());
+            let secs = median_seconds(|| {
+                let _ = integ.final_state(init, t_final);
+            });
+            if e <= 10.0 * tol {
+                best = best.min(secs);
+            }
+            cells.push(format!("{:>8.0} {:7.1e}", secs * 1e6, e));
+        }
+        let auto = Integrator::auto(model, tol, tol)?;
+        let end = auto.final_state(init, t_final).map_err(|f| f.error)?;
+        let e = err(end.q.as_slice(), end.p.as_slice());
+        let secs = median_seconds(|| {
+            let _ = auto.final_state(init, t_final);
+        });
+        let ratio = secs / best;
+        ratios.push(ratio);
+        println!(
+            "{name:<18} {tol:7.0e} | {} | {:>8} {:>8.0} {e:7.1e} | {ratio:5.2}",
+            cells.join(" |"),
+            auto.scheme().id().to_string(),
+            secs * 1e6,
+        );
+    }
+    Ok(ratios)
+}
+
+fn main() -> Result<(), forced_vi::Error> {
+    println!(
+        "{:<18} {:>7} | {} | {:>8} {:>8} {:>7} | auto/cheapest",
+        "model",
+        "tol",
+        (3..=7)
+            .map(|s| format!("lobatto{s}: µs     err"))
+            .collect::<Vec<_>>()
+            .join(" |"),
+        "auto",
+        "µs",
+        "err"
+    );
+    let mut all = Vec::new();
+    all.extend(measure(
+        "coupled_van_der_pol",
+        &CoupledVanDerPol::PAPER,
+        InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+        10.0,
+    )?);
+    all.extend(measure(
+        "kepler_drag",
+        &KeplerDrag::DEFAULT,
+        InitialState::from_velocity([1.0, 0.0], [0.0, 1.2]),
+        20.0,
+    )?);
+    all.extend(measure(
+        "double_pendulum",
+        &DoublePendulumFriction::DEFAULT,
+        InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]),
+        10.0,
+    )?);
+    all.extend(measure(
+        "henon_heiles*",
+        &HenonHeiles { c: 0.05 },
+        InitialState::from_velocity([0.3, 0.0], [0.0, 0.3]),
+        20.0,
+    )?);
+    all.extend(measure(
+        "elastic_pendulum*",
+        &ElasticPendulum {
+            g: 9.81,
+            k: 40.0,
+            c: 0.05,
+        },
+        InitialState::from_velocity([1.2, 0.8], [0.0, 0.0]),
+        10.0,
+    )?);
+    all.extend(measure(
+        "driven_pendulum*",
+        &DrivenPendulum {
+            c: 0.1,
+            a: 0.8,
+            w: 0.7,
+        },
+        InitialState::from_velocity([0.5], [0.0]),
+        20.0,
+    )?);
+    all.sort_by(f64::total_cmp);
+    println!(
+        "auto / cheapest: median {:.2}, worst {:.2} over {} cases (* = held out)",
+        all[all.len() / 2],
+        all[all.len() - 1],
+        all.len()
+    );
+    Ok(())
+}
