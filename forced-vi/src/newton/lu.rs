@@ -28,76 +28,149 @@ impl DenseLu {
 
     /// Factors `a`. Fails if a pivot is zero or negligible against the scale of its own
     /// row (a scale-invariant test: rows of very different sizes are not singular).
+    ///
+    /// Orders up to 12 run a copy of the same elimination compiled for their size
+    /// (the loops unrolled, the bounds known), with the same operations in the same order:
+    /// the factors are bit for bit those of the general loop.
     pub fn factor(&mut self, a: &DMatrix<f64>) -> Result<(), NewtonFailure> {
         let n = a.nrows();
         self.lu.as_mut_slice().copy_from_slice(a.as_slice());
-        let m = self.lu.as_mut_slice(); // column-major: m[i + j * n] is row i, column j
+        let (m, piv, scale) = (
+            self.lu.as_mut_slice(),
+            &mut self.piv[..],
+            &mut self.row_scale[..],
+        );
         if m.iter().any(|x| !x.is_finite()) {
             return Err(NewtonFailure::NonFinite);
         }
-        for (i, r) in self.row_scale.iter_mut().enumerate() {
-            *r = (0..n).fold(0.0f64, |s, j| s.max(m[i + j * n].abs()));
+        macro_rules! fixed {
+            ($($k:literal)*) => {
+                match n {
+                    $($k => factor_in_place::<$k>(m, piv, scale),)*
+                    _ => factor_general(n, m, piv, scale),
+                }
+            };
         }
-        for k in 0..n {
-            let col = &m[k * n..(k + 1) * n];
-            let (mut p, mut best) = (k, col[k].abs());
-            for (i, x) in col.iter().enumerate().skip(k + 1) {
-                if x.abs() > best {
-                    best = x.abs();
-                    p = i;
-                }
-            }
-            if best <= self.row_scale[p] * f64::EPSILON * 1e-3 || best == 0.0 {
-                return Err(NewtonFailure::SingularJacobian);
-            }
-            self.piv[k] = p;
-            if p != k {
-                for j in 0..n {
-                    m.swap(k + j * n, p + j * n);
-                }
-                self.row_scale.swap(k, p);
-            }
-            let inv = 1.0 / m[k + k * n];
-            for x in &mut m[k * n + k + 1..(k + 1) * n] {
-                *x *= inv;
-            }
-            for j in k + 1..n {
-                let u = m[k + j * n];
-                if u != 0.0 {
-                    let (left, right) = m.split_at_mut(j * n);
-                    let lcol = &left[k * n + k + 1..(k + 1) * n];
-                    for (x, l) in right[k + 1..n].iter_mut().zip(lcol) {
-                        *x -= l * u;
-                    }
-                }
-            }
-        }
-        Ok(())
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
     }
 
     /// Solves `A x = b` in place with the last factors.
     pub fn solve_in_place(&self, b: &mut DVector<f64>) {
         let n = self.piv.len();
-        let m = self.lu.as_slice();
-        let x = b.as_mut_slice();
-        for (k, &p) in self.piv.iter().enumerate() {
-            x.swap(k, p);
+        let (m, piv, x) = (self.lu.as_slice(), &self.piv[..], b.as_mut_slice());
+        macro_rules! fixed {
+            ($($k:literal)*) => {
+                match n {
+                    $($k => solve_fixed::<$k>(m, piv, x),)*
+                    _ => solve_general(n, m, piv, x),
+                }
+            };
         }
-        for j in 0..n {
-            let xj = x[j];
-            if xj != 0.0 {
-                for (xi, l) in x[j + 1..n].iter_mut().zip(&m[j * n + j + 1..(j + 1) * n]) {
-                    *xi -= l * xj;
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12)
+    }
+}
+
+/// The elimination of [`DenseLu::factor`] for order `K`, known at compile time.
+#[inline(never)]
+fn factor_in_place<const K: usize>(
+    m: &mut [f64],
+    piv: &mut [usize],
+    scale: &mut [f64],
+) -> Result<(), NewtonFailure> {
+    let (m, piv, scale) = (&mut m[..K * K], &mut piv[..K], &mut scale[..K]);
+    eliminate(K, m, piv, scale)
+}
+
+/// [`DenseLu::factor`]'s elimination for any order.
+fn factor_general(
+    n: usize,
+    m: &mut [f64],
+    piv: &mut [usize],
+    scale: &mut [f64],
+) -> Result<(), NewtonFailure> {
+    eliminate(n, m, piv, scale)
+}
+
+/// LU with partial pivoting of the column-major `n × n` matrix in `m` (`m[i + j n]` is row
+/// `i`, column `j`), in place; `scale` is scratch for the row scales.
+#[inline(always)]
+fn eliminate(
+    n: usize,
+    m: &mut [f64],
+    piv: &mut [usize],
+    scale: &mut [f64],
+) -> Result<(), NewtonFailure> {
+    for (i, r) in scale.iter_mut().enumerate().take(n) {
+        *r = (0..n).fold(0.0f64, |s, j| s.max(m[i + j * n].abs()));
+    }
+    for k in 0..n {
+        let col = &m[k * n..(k + 1) * n];
+        let (mut p, mut best) = (k, col[k].abs());
+        for (i, x) in col.iter().enumerate().skip(k + 1) {
+            if x.abs() > best {
+                best = x.abs();
+                p = i;
+            }
+        }
+        if best <= scale[p] * f64::EPSILON * 1e-3 || best == 0.0 {
+            return Err(NewtonFailure::SingularJacobian);
+        }
+        piv[k] = p;
+        if p != k {
+            for j in 0..n {
+                m.swap(k + j * n, p + j * n);
+            }
+            scale.swap(k, p);
+        }
+        let inv = 1.0 / m[k + k * n];
+        for x in &mut m[k * n + k + 1..(k + 1) * n] {
+            *x *= inv;
+        }
+        for j in k + 1..n {
+            let u = m[k + j * n];
+            if u != 0.0 {
+                let (left, right) = m.split_at_mut(j * n);
+                let lcol = &left[k * n + k + 1..(k + 1) * n];
+                for (x, l) in right[k + 1..n].iter_mut().zip(lcol) {
+                    *x -= l * u;
                 }
             }
         }
-        for j in (0..n).rev() {
-            x[j] /= m[j + j * n];
-            let xj = x[j];
-            if xj != 0.0 {
-                for (xi, u) in x[..j].iter_mut().zip(&m[j * n..j * n + j]) {
-                    *xi -= u * xj;
-                }
+    }
+    Ok(())
+}
+
+/// The substitutions of [`DenseLu::solve_in_place`] for order `K`, known at compile time.
+#[inline(never)]
+fn solve_fixed<const K: usize>(m: &[f64], piv: &[usize], x: &mut [f64]) {
+    substitute(K, &m[..K * K], &piv[..K], &mut x[..K]);
+}
+
+/// [`DenseLu::solve_in_place`]'s substitutions for any order.
+fn solve_general(n: usize, m: &[f64], piv: &[usize], x: &mut [f64]) {
+    substitute(n, m, piv, x);
+}
+
+/// Forward and back substitution with the factors in `m` and the pivots `piv`.
+#[inline(always)]
+fn substitute(n: usize, m: &[f64], piv: &[usize], x: &mut [f64]) {
+    for (k, &p) in piv.iter().enumerate().take(n) {
+        x.swap(k, p);
+    }
+    for j in 0..n {
+        let xj = x[j];
+        if xj != 0.0 {
+            for (xi, l) in x[j + 1..n].iter_mut().zip(&m[j * n + j + 1..(j + 1) * n]) {
+                *xi -= l * xj;
+            }
+        }
+    }
+    for j in (0..n).rev() {
+        x[j] /= m[j + j * n];
+        let xj = x[j];
+        if xj != 0.0 {
+            for (xi, u) in x[..j].iter_mut().zip(&m[j * n..j * n + j]) {
+                *xi -= u * xj;
             }
         }
     }
