@@ -113,6 +113,14 @@ fn quick_report_writes_csvs_plots_and_the_paper_orders() {
     let section = read(&out.join("sections/work_precision.md"));
     assert!(section.contains("tolerance proportionality"));
     assert!(section.contains("`lobatto3 (adaptive)`"));
+    // heyoka, the external baseline: its own columns and series, labelled external, and no
+    // series on the ensemble, where it ran member 0 alone.
+    let external = "heyoka (external, measured at commit time, JIT excluded)";
+    assert!(section.contains(&format!("| {external} |")));
+    assert!(section.contains("**Bold**: the cheapest of the methods timed by this run."));
+    assert!(read(&out.join("work_precision_kepler_drag.svg")).contains(external));
+    let ensemble = read(&out.join("work_precision_coupled_van_der_pol_ensemble.svg"));
+    assert!(!ensemble.contains("heyoka"));
     for svg in [
         "error_vs_h_coupled_van_der_pol.svg",
         "work_precision_kepler_drag.svg",

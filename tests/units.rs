@@ -194,6 +194,9 @@ mod report_style {
         assert!(Look::of(&bdf, &[]).dashed && !Look::of(&l2, &[]).dashed);
         assert!(Look::adaptive(&l2, &[]).dashed);
         assert_eq!(Look::adaptive(&l2, &[]).color, PALETTE[0]);
+        let external = Look::external();
+        assert!(external.dashed && !PALETTE.contains(&external.color));
+        assert_eq!(external.shape, Some(Shape::HollowSquare));
         assert_eq!(sci(&1e-3), "1e-3");
         assert_eq!(sci(&1.0), "1");
         assert_eq!(log_range([1.0, 4.0, -1.0].into_iter()), Some((0.5, 8.0)));
@@ -651,5 +654,79 @@ mod report_step_cost {
             assert!(src.contains(&format!("pub struct M{i}")));
         }
         assert!(compile::crate_source(1).contains("M0 { eps: 0.5, rho: 0.5, lambda: 0.5 }"));
+    }
+}
+
+mod report_external {
+    use forced_vi_scenes::report::work_precision::external::*;
+    use forced_vi_scenes::report::work_precision::Summary;
+    use forced_vi_scenes::scenes::all;
+
+    const HEADER: &str = "scene,member,tol,order,steps,error,err_p,err_energy,run_seconds,\
+                          jit_seconds,overhead_seconds,repeats,heyoka_version";
+
+    /// The committed heyoka file parses, says where it was measured, covers the non-stiff,
+    /// unconstrained scenes (member 0) and converges to their references: a check of the
+    /// script's hand-written equations through the data it committed.
+    #[test]
+    fn committed_heyoka_file_fits_the_scenes() {
+        let ext = External::heyoka().unwrap();
+        assert!(ext.provenance.contains("commit time"), "{}", ext.provenance);
+        assert!(!ext.versions().is_empty());
+        let scenes = all().unwrap();
+        for s in &scenes {
+            let rows: Vec<&ExternalRow> = ext.rows.iter().filter(|r| r.scene == s.name()).collect();
+            if s.name() == "cartesian_pendulum" {
+                assert!(rows.is_empty(), "a constrained scene");
+                continue;
+            }
+            assert!(rows.len() >= 10, "{}: {} rows", s.name(), rows.len());
+            assert!(rows.iter().all(|r| r.member == 0 && r.repeats >= 1));
+            let tightest = rows.iter().min_by(|a, b| a.tol.total_cmp(&b.tol)).unwrap();
+            assert!(tightest.error < 1e-9, "{}: {:e}", s.name(), tightest.error);
+        }
+        assert!(ext
+            .rows
+            .iter()
+            .all(|r| scenes.iter().any(|s| s.name() == r.scene)));
+    }
+
+    #[test]
+    fn bad_rows_are_errors_and_the_cheapest_run_meets_the_target() {
+        let row = |tol: &str, err: &str, secs: &str| {
+            format!("kepler_drag,0,{tol},9,59,{err},1e-9,1e-9,{secs},2e-2,1e-6,5,7.0.0\n")
+        };
+        let text = format!(
+            "# note\n{HEADER}\n{}{}{}",
+            row("1e-4", "1e-5", "1e-5"),
+            row("1e-8", "1e-9", "2e-5"),
+            row("1e-10", "1e-11", "3e-5")
+        );
+        let ext = External::parse(&text).unwrap();
+        assert_eq!(ext.provenance, "note");
+        let summary = Summary {
+            external: ext.of_scenes(&["kepler_drag"]),
+            ..Summary::default()
+        };
+        let rows = summary.external_rows("kepler_drag");
+        assert_eq!(
+            rows.iter().map(|r| r.tol).collect::<Vec<_>>(),
+            [1e-4, 1e-8, 1e-10]
+        );
+        let at = |target| {
+            summary
+                .external_cheapest("kepler_drag", target)
+                .map(|r| r.tol)
+        };
+        assert_eq!(at(1e-6), Some(1e-8));
+        assert_eq!(at(1e-3), Some(1e-4));
+        assert_eq!(at(1e-12), None);
+        assert!(summary.external_rows("damped_oscillator").is_empty());
+
+        let negative = format!("{HEADER}\n{}", row("1e-4", "-1e-5", "1e-5"));
+        assert!(External::parse(&negative).is_err());
+        let nan = format!("{HEADER}\n{}", row("1e-4", "1e-5", "NaN"));
+        assert!(External::parse(&nan).is_err());
+        assert!(External::parse("scene,tol\nkepler_drag,1e-4\n").is_err());
     }
 }

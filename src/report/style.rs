@@ -4,7 +4,8 @@
 //! metrics, fed with the bundled DejaVu Sans (`assets/DejaVuSans.ttf`, licence beside it), so no
 //! system font library is needed. Each method keeps one colour and marker in every plot;
 //! variational schemes are solid lines with filled circles (dashed for their adaptive runs),
-//! baselines dashed lines with other markers.
+//! baselines dashed lines with other markers, and the external baseline (heyoka, measured
+//! outside the report) a black dashed line with hollow squares.
 
 use std::path::Path;
 use std::sync::OnceLock;
@@ -73,6 +74,8 @@ pub enum Shape {
     Cross,
     /// A circle outline.
     Ring,
+    /// A square outline (the external baseline).
+    HollowSquare,
 }
 
 /// How a curve is drawn: colour, solid or dashed, and its marker (none: a plain line).
@@ -120,6 +123,16 @@ impl Look {
         Look {
             dashed: true,
             ..Look::of(method, methods)
+        }
+    }
+
+    /// The look of an external baseline, measured outside the report (heyoka): black,
+    /// dashed, hollow squares, unlike every method of the report.
+    pub fn external() -> Look {
+        Look {
+            color: BLACK,
+            dashed: true,
+            shape: Some(Shape::HollowSquare),
         }
     }
 
@@ -171,6 +184,17 @@ impl<C, DB: DrawingBackend> Drawable<DB> for Mark<C> {
             Shape::HollowTriangle => {
                 let mut path = tri.clone();
                 path.push(tri[0]);
+                backend.draw_path(path, &line)
+            }
+            Shape::HollowSquare => {
+                let corners = [
+                    (x - 5, y - 5),
+                    (x + 5, y - 5),
+                    (x + 5, y + 5),
+                    (x - 5, y + 5),
+                ];
+                let mut path = corners.to_vec();
+                path.push(corners[0]);
                 backend.draw_path(path, &line)
             }
             Shape::Cross => {

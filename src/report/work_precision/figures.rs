@@ -5,6 +5,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use super::external::HEYOKA_LABEL;
 use super::rows::{LongRun, Mode, Summary};
 use crate::report::chart::{draw_chart, legend_beside, Axes, Curve};
 use crate::report::style::{self, log_range, plot_err, Look, FAMILY};
@@ -108,9 +109,31 @@ fn error_vs_h(path: &Path, scene: &dyn Scene, summary: &Summary) -> Result<bool,
     Ok(true)
 }
 
-/// Error in q against wall time, all methods (fixed-step and adaptive), one scene.
+/// The external baseline's curve on `scene`, if it was measured there: error in q against its
+/// run time (JIT excluded), loosest tolerance first. None on an ensemble, where it ran member
+/// 0 alone and the plot's times are those of the whole ensemble.
+fn external_curve(scene: &dyn Scene, summary: &Summary) -> Option<Curve> {
+    if scene.members() > 1 {
+        return None;
+    }
+    let points: Vec<(f64, f64)> = summary
+        .external_rows(scene.name())
+        .iter()
+        .map(|r| (r.run_seconds, r.error))
+        .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+        .collect();
+    (!points.is_empty()).then(|| Curve {
+        look: Look::external(),
+        label: HEYOKA_LABEL.to_string(),
+        points,
+        band: None,
+    })
+}
+
+/// Error in q against wall time, all methods (fixed-step and adaptive), one scene, and the
+/// external baseline as a series of its own.
 fn work_precision(path: &Path, scene: &dyn Scene, summary: &Summary) -> Result<bool, String> {
-    let curves: Vec<Curve> = summary
+    let mut curves: Vec<Curve> = summary
         .series()
         .iter()
         .filter_map(|(m, mode)| {
@@ -135,6 +158,7 @@ fn work_precision(path: &Path, scene: &dyn Scene, summary: &Summary) -> Result<b
             })
         })
         .collect();
+    curves.extend(external_curve(scene, summary));
     let (Some(xr), Some(y_range)) = (
         log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0))),
         log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.1))),

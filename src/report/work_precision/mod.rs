@@ -22,6 +22,14 @@
 //! On [`LONG_RUN_SCENE`] to `t = 1000`, the energy-balance error `E(t) − E(0) − W(t)` is
 //! recorded for every selected method at about equal cost (see [`long_run`]).
 //!
+//! # The external baseline
+//!
+//! heyoka, an adaptive Taylor integrator, is not run by the report: [`external`] embeds its
+//! timings on the non-stiff scenes from `data/baselines/heyoka.csv` (measured by
+//! `scripts/heyoka_baseline.py` when the file was committed), and the cheapest-method table and
+//! the error-against-time plots show them as a separate, labelled series, never in the bold
+//! marks of the methods timed here.
+//!
 //! # The study
 //!
 //! One case is one method swept over its grid on one scene ([`sweep`]); cases run one at a
@@ -38,6 +46,7 @@ use crate::report::table::write_csv;
 use crate::report::{readme, Method, Options, ReportError};
 use crate::scenes::{self, Scene};
 
+pub mod external;
 pub mod figures;
 pub mod large;
 pub mod long_run;
@@ -115,9 +124,17 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
         scenes: &selected,
         plan: &plan,
     };
+    let scene_names: Vec<&'static str> = selected.iter().map(|s| s.name()).collect();
+    let external = external::External::heyoka()
+        .map_err(|message| ReportError::Io {
+            path: external::HEYOKA_PATH.into(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidData, message),
+        })?
+        .of_scenes(&scene_names);
     let mut summary = Summary {
-        scenes: selected.iter().map(|s| s.name()).collect(),
+        scenes: scene_names,
         methods: methods.clone(),
+        external,
         ..Summary::default()
     };
     for swept in run_cases(&sweeps, &cases, opts.progress) {

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::external::External;
 use crate::report::orders::Fit;
 use crate::report::table::{sci, text};
 use crate::report::Method;
@@ -173,6 +174,9 @@ pub struct Summary {
     pub large: Vec<(&'static str, f64)>,
     /// Wall time of the whole report in seconds.
     pub elapsed: f64,
+    /// External baselines on the selected scenes (heyoka): committed measurements, not
+    /// runs of this report.
+    pub external: External,
 }
 
 impl Summary {

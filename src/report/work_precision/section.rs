@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 
 use forced_vi::Scheme;
 
+use super::external::{ExternalRow, HEYOKA_LABEL, HEYOKA_PATH};
 use super::figures::{Figures, BALANCE_FLOOR};
 use super::large;
 use super::long_run::LONG_RUN_REFERENCE_H;
@@ -178,7 +179,53 @@ fn scenes_and_methods(i: &Inputs<'_>) -> String {
         plan.max_run_seconds,
         PREDICTED_RUN_FACTOR * plan.max_run_seconds,
     );
+    md.push_str(&external_method(i.summary));
     md
+}
+
+/// The paragraph on the external heyoka baseline (empty when none of its scenes is selected).
+fn external_method(summary: &Summary) -> String {
+    let ext = &summary.external;
+    if ext.rows.is_empty() {
+        return String::new();
+    }
+    let mut scenes: Vec<&str> = ext.rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    let range = |f: fn(&ExternalRow) -> f64| {
+        let lo = ext.rows.iter().map(f).fold(f64::INFINITY, f64::min);
+        let hi = ext.rows.iter().map(f).fold(0.0, f64::max);
+        (fmt_time(lo), fmt_time(hi))
+    };
+    let (jit_lo, jit_hi) = range(|r| r.jit_seconds);
+    let (call_lo, call_hi) = range(|r| r.overhead_seconds);
+    let tols = ext.rows.iter().map(|r| r.tol);
+    let (tol_lo, tol_hi) = (
+        tols.clone().fold(f64::INFINITY, f64::min),
+        tols.fold(0.0, f64::max),
+    );
+    format!(
+        "**External baseline: heyoka {}** (adaptive Taylor series, compiled just in time by \
+         LLVM; the Python package), on {}: tol from {tol_hi:.0e} to {tol_lo:.0e}. It is not \
+         run by this command: `scripts/heyoka_baseline.py` measured it when `{HEYOKA_PATH}` \
+         was committed (the file says: “{}”), on the same initial data, final time and \
+         reference (`data/reference/`), with the same error in q; its equations are written \
+         by hand and checked against L and F by finite differences. Its times are medians of \
+         repeated `propagate_until` calls and leave out the JIT build of the integrator, done \
+         once per tolerance ({jit_lo} to {jit_hi}, in the cheapest-method table beside each \
+         time); they include the Python call ({call_lo} to {call_hi}). Being measured \
+         elsewhere and at another time, it is labelled external in the tables and plots (black \
+         dashed line, hollow squares) and never counts as this report's cheapest method. On \
+         the ensemble it ran member 0 alone: the table marks that time, and the ensemble's \
+         plot, whose times are those of the whole ensemble, leaves it out. Not measured: the \
+         constrained and stiff scenes and the large models.\n\n",
+        ext.versions(),
+        scenes
+            .iter()
+            .map(|s| format!("`{s}`"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        ext.provenance,
+    )
 }
 
 fn fmt_order(f: &Option<Fit>) -> String {
@@ -317,11 +364,59 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
     md
 }
 
-/// One line of the cheapest-method table: a scene, a target and each method's time.
-struct Cheapest {
+/// One line of the cheapest-method table: a scene, a target, each method's time and the
+/// external baseline's cheapest run.
+struct Cheapest<'a> {
     scene: &'static str,
+    members: usize,
     target: f64,
     times: Vec<Option<f64>>,
+    external: Option<&'a ExternalRow>,
+}
+
+impl Cheapest<'_> {
+    /// The bold time: the cheapest of the methods timed by this run.
+    fn best(&self) -> Option<f64> {
+        self.times.iter().flatten().copied().min_by(f64::total_cmp)
+    }
+}
+
+/// How the external baseline compares with the bold times, on the single-trajectory scenes
+/// where both reached the target.
+struct Tally {
+    /// Rows compared.
+    rows: usize,
+    /// Rows where its run time is below the bold one.
+    faster: usize,
+    /// The smallest and largest factor bold time / its time among those.
+    factors: (f64, f64),
+    /// Rows where its run time plus its JIT build is below the bold time.
+    faster_with_jit: usize,
+}
+
+fn external_tally(lines: &[Cheapest<'_>]) -> Tally {
+    let pairs: Vec<(f64, &ExternalRow)> = lines
+        .iter()
+        .filter(|c| c.members == 1)
+        .filter_map(|c| Some((c.best()?, c.external?)))
+        .collect();
+    let faster: Vec<f64> = pairs
+        .iter()
+        .filter(|(b, e)| e.run_seconds < *b)
+        .map(|(b, e)| b / e.run_seconds)
+        .collect();
+    Tally {
+        rows: pairs.len(),
+        faster: faster.len(),
+        factors: (
+            faster.iter().copied().fold(f64::INFINITY, f64::min),
+            faster.iter().copied().fold(0.0, f64::max),
+        ),
+        faster_with_jit: pairs
+            .iter()
+            .filter(|(b, e)| e.run_seconds + e.jit_seconds < *b)
+            .count(),
+    }
 }
 
 fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
@@ -335,8 +430,10 @@ fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
                 .collect();
             lines.push(Cheapest {
                 scene: s.name(),
+                members: s.members(),
                 target,
                 times,
+                external: summary.external_cheapest(s.name(), target),
             });
         }
     }
@@ -345,22 +442,64 @@ fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
         col("target", |c: &Cheapest| format!("{:.0e}", c.target)),
     ];
     for (k, (m, mode)) in summary.series().into_iter().enumerate() {
-        cols.push(col(format!("`{}`", mode.label(&m)), move |c: &Cheapest| {
-            let best = c.times.iter().flatten().copied().min_by(f64::total_cmp);
-            match c.times[k] {
-                Some(t) if Some(t) == best => format!("**{}**", fmt_time(t)),
+        cols.push(col(
+            format!("`{}`", mode.label(&m)),
+            move |c: &Cheapest| match c.times[k] {
+                Some(t) if Some(t) == c.best() => format!("**{}**", fmt_time(t)),
                 Some(t) => fmt_time(t),
                 None => "–".into(),
-            }
-        }));
+            },
+        ));
     }
-    format!(
+    let mut text = String::from(
         "\n### Cheapest method per error target\n\n\
          Median wall time of the cheapest measured run whose error in q is at most the \
          target (– : never reached), fixed-step and adaptive (`(adaptive)`) runs alike. \
-         **Bold**: the cheapest method.\n\n{}",
-        markdown(&lines, &cols)
-    )
+         **Bold**: the cheapest of the methods timed by this run.",
+    );
+    if !summary.external.rows.is_empty() {
+        let unmeasured = |c: &Cheapest| summary.external_rows(c.scene).is_empty();
+        cols.push(col(HEYOKA_LABEL, move |c: &Cheapest| {
+            match (c.external, unmeasured(c)) {
+                (_, true) => "not measured".into(),
+                (None, false) => "–".into(),
+                (Some(r), false) if c.members > 1 => {
+                    format!("{} (member 0 alone)", fmt_time(r.run_seconds))
+                }
+                (Some(r), false) => fmt_time(r.run_seconds),
+            }
+        }));
+        cols.push(col("heyoka JIT build (not in its time)", |c: &Cheapest| {
+            c.external.map_or("–".into(), |r| fmt_time(r.jit_seconds))
+        }));
+        let tally = external_tally(&lines);
+        let factors = if tally.faster > 0 {
+            format!(
+                ", by factors of {:.1} to {:.1}",
+                tally.factors.0, tally.factors.1
+            )
+        } else {
+            String::new()
+        };
+        let _ = write!(
+            text,
+            " The last two columns are the external heyoka baseline (see Methods), which is not \
+             part of that comparison: its cheapest run from `{HEYOKA_PATH}` reaching the \
+             target, timed by another process when that file was committed, and the JIT \
+             build of that run, which its time leaves out. On the ensemble it ran member 0 \
+             alone, against the whole ensemble in the other columns. On the single-trajectory \
+             scenes, heyoka's time is below the bold one in {} of the {} rows where both \
+             reached the target{factors}; with its JIT build added, in {}.",
+            tally.faster,
+            tally.rows,
+            match tally.faster_with_jit {
+                0 => "none".to_string(),
+                n => n.to_string(),
+            },
+        );
+    }
+    let _ = write!(text, "\n\n{}", markdown(&lines, &cols));
+    text
 }
 
 fn plots(scenes: &[&dyn Scene], figures: &Figures) -> String {
