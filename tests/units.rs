@@ -708,20 +708,21 @@ mod report_external {
             external: ext.of_scenes(&["kepler_drag"]),
             ..Summary::default()
         };
-        let rows = summary.external_rows("kepler_drag");
+        let rows = summary.external.rows_of("kepler_drag");
         assert_eq!(
             rows.iter().map(|r| r.tol).collect::<Vec<_>>(),
             [1e-4, 1e-8, 1e-10]
         );
         let at = |target| {
             summary
-                .external_cheapest("kepler_drag", target)
+                .external
+                .cheapest("kepler_drag", target)
                 .map(|r| r.tol)
         };
         assert_eq!(at(1e-6), Some(1e-8));
         assert_eq!(at(1e-3), Some(1e-4));
         assert_eq!(at(1e-12), None);
-        assert!(summary.external_rows("damped_oscillator").is_empty());
+        assert!(summary.external.rows_of("damped_oscillator").is_empty());
 
         let negative = format!("{HEADER}\n{}", row("1e-4", "-1e-5", "1e-5"));
         assert!(External::parse(&negative).is_err());

@@ -258,7 +258,11 @@ impl<const N: usize> InitialState<N> {
             let m = model.constraint_count();
             if m > 0 && node.sparse_constraint_count() == m {
                 let (mut q, mut v) = (q, v);
-                crate::sparse::constraints::project_initial(node, &mut q, &mut v)?;
+                crate::sparse::constraints::project_initial(
+                    node,
+                    (&mut q, &mut v),
+                    CONSTRAINT_TOL,
+                )?;
                 return Ok(InitialState::from_velocity(q, v));
             }
         }

@@ -4,7 +4,6 @@
 //! step (and projects initial data), by the sparse LU on a fixed pattern.
 
 use crate::error::{Error, NewtonFailure};
-use crate::initial::CONSTRAINT_TOL;
 use crate::model::{ConstraintSink, NodeBlocks, NodePattern, NodeSink, SparseNode};
 use crate::sparse::lu::SparseLu;
 use crate::sparse::pattern::{record_node_pattern, transpose};
@@ -333,11 +332,12 @@ impl Saddle {
 
 /// [`InitialState::projected`](crate::InitialState::projected) on sparse storage: Gauss–Newton
 /// steps of least change onto `g(q) = 0`, then `v` onto `G v = 0`, each a solve with
-/// `[[I, Gᵀ], [G, 0]]`.
+/// `[[I, Gᵀ], [G, 0]]`; `tol` is the initial-data check's relative tolerance
+/// ([`crate::initial::CONSTRAINT_TOL`]).
 pub(crate) fn project_initial(
     node: &dyn SparseNode,
-    q: &mut [f64],
-    v: &mut [f64],
+    (q, v): (&mut [f64], &mut [f64]),
+    tol: f64,
 ) -> Result<(), Error> {
     let pattern = record_node_pattern(node, 0.0, q, v)?;
     let (g_pattern, _) = record_constraint_patterns(node, 0.0, q)?;
@@ -353,7 +353,7 @@ pub(crate) fn project_initial(
             .map_err(non_finite)?;
         let size = 1.0 + max_norm(q);
         let g = max_norm(cons.g_at(0));
-        done = g <= 0.01 * CONSTRAINT_TOL * size;
+        done = g <= 0.01 * tol * size;
         // Quadratic convergence until round-off stops it (a step that no longer halves `g`).
         if g == 0.0 || (done && g > 0.5 * last) {
             break;
@@ -369,7 +369,7 @@ pub(crate) fn project_initial(
         return Err(Error::InconsistentInitialState {
             what: "position",
             residual: max_norm(cons.g_at(0)),
-            tol: CONSTRAINT_TOL * (1.0 + max_norm(q)),
+            tol: tol * (1.0 + max_norm(q)),
         });
     }
     let e = cons.pattern.nnz();

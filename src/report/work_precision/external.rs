@@ -9,8 +9,6 @@
 
 use serde::Deserialize;
 
-use super::rows::Summary;
-
 /// The committed heyoka timings.
 pub const HEYOKA_CSV: &str = include_str!("../../../data/baselines/heyoka.csv");
 
@@ -117,22 +115,17 @@ impl External {
     }
 }
 
-impl Summary {
-    /// The external rows of `scene`, loosest tolerance first (the order of a sweep).
-    pub fn external_rows(&self, scene: &str) -> Vec<&ExternalRow> {
-        let mut rows: Vec<&ExternalRow> = self
-            .external
-            .rows
-            .iter()
-            .filter(|r| r.scene == scene)
-            .collect();
+impl External {
+    /// The rows of `scene`, loosest tolerance first (the order of a sweep).
+    pub fn rows_of(&self, scene: &str) -> Vec<&ExternalRow> {
+        let mut rows: Vec<&ExternalRow> = self.rows.iter().filter(|r| r.scene == scene).collect();
         rows.sort_by(|a, b| b.tol.total_cmp(&a.tol));
         rows
     }
 
-    /// The fastest external run on `scene` whose error in q is at most `target`.
-    pub fn external_cheapest(&self, scene: &str, target: f64) -> Option<&ExternalRow> {
-        self.external_rows(scene)
+    /// The fastest run on `scene` whose error in q is at most `target`.
+    pub fn cheapest(&self, scene: &str, target: f64) -> Option<&ExternalRow> {
+        self.rows_of(scene)
             .into_iter()
             .filter(|r| r.error <= target)
             .min_by(|a, b| a.run_seconds.total_cmp(&b.run_seconds))

@@ -117,7 +117,8 @@ fn external_curve(scene: &dyn Scene, summary: &Summary) -> Option<Curve> {
         return None;
     }
     let points: Vec<(f64, f64)> = summary
-        .external_rows(scene.name())
+        .external
+        .rows_of(scene.name())
         .iter()
         .map(|r| (r.run_seconds, r.error))
         .filter(|p| p.0 > 0.0 && p.1 > 0.0)

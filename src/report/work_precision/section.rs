@@ -433,7 +433,7 @@ fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
                 members: s.members(),
                 target,
                 times,
-                external: summary.external_cheapest(s.name(), target),
+                external: summary.external.cheapest(s.name(), target),
             });
         }
     }
@@ -458,7 +458,7 @@ fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
          **Bold**: the cheapest of the methods timed by this run.",
     );
     if !summary.external.rows.is_empty() {
-        let unmeasured = |c: &Cheapest| summary.external_rows(c.scene).is_empty();
+        let unmeasured = |c: &Cheapest| summary.external.rows_of(c.scene).is_empty();
         cols.push(col(HEYOKA_LABEL, move |c: &Cheapest| {
             match (c.external, unmeasured(c)) {
                 (_, true) => "not measured".into(),
