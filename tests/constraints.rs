@@ -255,23 +255,8 @@ fn constraint_errors_are_typed() {
             .map_err(|f| f.error),
         Err(Error::NoSparseKernels { .. })
     ));
-    // Sparse kernels that do not evaluate the model's constraints: refused on the sparse
-    // backend, the dense one otherwise.
-    let chain = NoSparseConstraints(RigidChain::default());
-    let forced = Integrator::new(&chain, Scheme::lobatto(3).expect("s"), 0.01)
-        .expect("integrator")
-        .linear_path(LinearPath::Sparse);
-    assert!(matches!(
-        forced
-            .final_state(chain.0.initial(), 0.1)
-            .map_err(|f| f.error),
-        Err(Error::UnsupportedConstraints { .. })
-    ));
-    let auto = Integrator::new(&chain, Scheme::lobatto(3).expect("s"), 0.01).expect("integrator");
-    assert_eq!(
-        auto.path_for(&chain.0.initial()).expect("path"),
-        LinearPath::Dense
-    );
+    // Sparse kernels that do not evaluate the model's constraints: the constraints' kernels
+    // come from dual numbers (`constraint_chain_dual_number_kernels_*`).
     // Derivatives do not carry the multipliers yet: refused, not wrong.
     assert!(matches!(
         integ
@@ -768,4 +753,123 @@ fn constraint_chain_256_links_adaptive_dense_output_and_projection_on_the_sparse
         .map(|r| r.constraint_residual)
         .fold(0.0, f64::max);
     assert!(worst < 1e-12 * model.l * model.l, "{worst:.2e}");
+}
+
+#[test]
+fn constraint_chain_dual_number_kernels_equal_the_hand_written_ones() {
+    // The chain's node kernels without its constraint kernels: the runtime differentiates its
+    // generic `constraints` instead, on the sparse backend.
+    let chain = NoSparseConstraints(RigidChain::default());
+    for s in [2, 3, 5] {
+        let scheme = Scheme::lobatto(s).expect("scheme");
+        let dual = chain_run_of(
+            &chain,
+            chain.0.initial(),
+            scheme.clone(),
+            LinearPath::Sparse,
+        );
+        let hand = chain_run(&chain.0, scheme, 0.01, 0.5, LinearPath::Sparse);
+        let (a, b) = (
+            dual.records.last().expect("end"),
+            hand.records.last().expect("end"),
+        );
+        let (dq, dp) = ((a.q - b.q).amax(), (a.p - b.p).amax());
+        println!(
+            "lobatto{s}: dual-number against hand-written kernels |dq| {dq:.1e} |dp| {dp:.1e}"
+        );
+        assert!(dq < 1e-13 && dp < 1e-13, "lobatto{s}: {dq:.1e} {dp:.1e}");
+    }
+}
+
+fn chain_run_of<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    init: InitialState<N>,
+    scheme: Scheme,
+    path: LinearPath,
+) -> forced_vi::Trajectory<N> {
+    Integrator::new(model, scheme, 0.01)
+        .expect("integrator")
+        .linear_path(path)
+        .run(init, 0.5)
+        .expect("run")
+}
+
+/// An FPU chain whose two ends are held on the unit circle: `q_0² + q_{N−1}² = 1`. Written
+/// with the attribute, which splits its Lagrangian into sparse node kernels but emits no
+/// sparse constraint kernels.
+#[forced_vi::forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..N - 1)
+            .map(|i| {
+                let d = q[i + 1] - q[i];
+                0.5 * k * d * d + 0.25 * beta * d * d * d * d
+            })
+            .sum(),
+    force(q[i] = -c * q_dot[i]),
+    constraints(q[0] * q[0] + q[N - 1] * q[N - 1] - 1.0),
+)]
+struct HeldChain<const N: usize> {
+    k: f64,
+    beta: f64,
+    c: f64,
+}
+
+fn held_start<const N: usize>(model: &HeldChain<N>) -> InitialState<N> {
+    let q = std::array::from_fn(|i| 0.6 * (std::f64::consts::PI * i as f64 / (N - 1) as f64).cos());
+    let v = std::array::from_fn(|i| 0.3 * (i as f64 * 0.4).sin());
+    InitialState::projected(model, q, v).expect("projection")
+}
+
+#[test]
+fn constraint_macro_model_runs_on_the_sparse_backend_with_dual_number_constraint_kernels() {
+    let small = HeldChain::<16> {
+        k: 1.0,
+        beta: 0.5,
+        c: 0.05,
+    };
+    assert!(
+        small.sparse_node().is_some(),
+        "the attribute splits this model"
+    );
+    for s in [2, 4] {
+        let scheme = Scheme::lobatto(s).expect("scheme");
+        let init = held_start(&small);
+        let dense = chain_run_of(&small, init, scheme.clone(), LinearPath::Dense);
+        let sparse = chain_run_of(&small, init, scheme, LinearPath::Sparse);
+        let (a, b) = (
+            dense.records.last().expect("end"),
+            sparse.records.last().expect("end"),
+        );
+        let (dq, dp) = ((a.q - b.q).amax(), (a.p - b.p).amax());
+        let worst = sparse
+            .records
+            .iter()
+            .map(|r| r.constraint_residual)
+            .fold(0.0, f64::max);
+        println!("lobatto{s}: sparse against dense |dq| {dq:.1e} |dp| {dp:.1e}, max(|g|, |Gv|) {worst:.1e}");
+        assert!(dq < 1e-12 && dp < 1e-12, "lobatto{s}: {dq:.1e} {dp:.1e}");
+        assert!(worst < 1e-13, "lobatto{s}: {worst:.1e}");
+    }
+    // A size the dense backend refuses (N > 512): the sparse backend, by itself.
+    let large = HeldChain::<1024> {
+        k: 1.0,
+        beta: 0.5,
+        c: 0.05,
+    };
+    let init = held_start(&large);
+    let integ =
+        Integrator::new(&large, Scheme::lobatto(3).expect("scheme"), 0.01).expect("integrator");
+    assert_eq!(integ.path_for(&init).expect("path"), LinearPath::Sparse);
+    let run = integ.run(init, 0.2).expect("run at N = 1024");
+    let worst = run
+        .records
+        .iter()
+        .map(|r| r.constraint_residual)
+        .fold(0.0, f64::max);
+    println!(
+        "N = 1024: {} steps, max(|g|, |Gv|) {worst:.1e}",
+        run.records.len() - 1
+    );
+    assert!(worst < 1e-13, "{worst:.1e}");
 }

@@ -320,7 +320,7 @@ impl Error {
     /// first evaluation.
     pub(crate) fn outside_pattern() -> Error {
         Error::InvalidModel {
-            message: "the sparse node kernels wrote outside the pattern recorded at the first evaluation (their entries must not depend on the state)".into(),
+            message: "the sparse node or constraint kernels wrote outside the pattern recorded at the first evaluation (their entries must not depend on the state)".into(),
         }
     }
 }

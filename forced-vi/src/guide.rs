@@ -321,8 +321,10 @@
 //! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
 //! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),
-//! [`SparseNode::eval_constraints`](crate::model::SparseNode::eval_constraints)); the
-//! attribute does not emit sparse constraint kernels yet. Initial data must lie on the constraints
+//! [`SparseNode::eval_constraints`](crate::model::SparseNode::eval_constraints)); for a model
+//! written with the attribute, whose sparse kernels leave the constraints out, the runtime
+//! differentiates `constraints` with dual numbers (`N` evaluations of `g` per node: meant for
+//! a few constraints on a large model). Initial data must lie on the constraints
 //! ([`Error::InconsistentInitialState`]); [`InitialState::projected`] puts it there.
 //!
 //! ```

@@ -256,13 +256,16 @@ impl<const N: usize> InitialState<N> {
         #[cfg(feature = "sparse")]
         if let Some(node) = model.sparse_node() {
             let m = model.constraint_count();
+            let (mut q, mut v) = (q, v);
+            let qv = (&mut q[..], &mut v[..]);
             if m > 0 && node.sparse_constraint_count() == m {
-                let (mut q, mut v) = (q, v);
-                crate::sparse::constraints::project_initial(
-                    node,
-                    (&mut q, &mut v),
-                    CONSTRAINT_TOL,
-                )?;
+                crate::sparse::constraints::project_initial(node, qv, CONSTRAINT_TOL)?;
+                return Ok(InitialState::from_velocity(q, v));
+            }
+            // A large model: its constraints' kernels from dual numbers, on sparse storage.
+            if m > 0 && N >= crate::LinearPath::SPARSE_MIN_DOF {
+                let node = crate::model::DualConstraints { model, node };
+                crate::sparse::constraints::project_initial(&node, qv, CONSTRAINT_TOL)?;
                 return Ok(InitialState::from_velocity(q, v));
             }
         }

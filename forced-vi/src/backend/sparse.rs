@@ -5,11 +5,11 @@
 use super::{Layout, StepBackend, StepFailure};
 use crate::error::Error;
 use crate::error::NewtonFailure;
-use crate::model::{NodePattern, NodeSink, SparseNode};
+use crate::model::{NodePattern, NodeSink};
 use crate::newton::{NewtonOptions, NewtonReport};
 use crate::scheme::Scheme;
 use crate::sparse::constraints::Saddle;
-use crate::sparse::equations::SparseStep;
+use crate::sparse::equations::{NodeRef, SparseStep};
 use crate::sparse::lu::SparseLu;
 use crate::sparse::newton::SparseNewton;
 use crate::sparse::velocity::VelocitySolver;
@@ -37,7 +37,7 @@ impl<'a> SparseBackend<'a> {
     /// constrained model, the pattern of `G`); with `constant_mass` (the model's promise)
     /// the velocity solve factors `E` once.
     pub(crate) fn new(
-        node: &'a dyn SparseNode,
+        node: NodeRef<'a>,
         scheme: &'a Scheme,
         (pattern, g_pattern): (NodePattern, Option<NodePattern>),
         newton: NewtonOptions,
@@ -109,7 +109,7 @@ impl<'a> SparseBackend<'a> {
         let q1 = &prob.xs[(s - 1) * n..s * n];
         saddle
             .end_of_step(
-                prob.node,
+                prob.node.get(),
                 &prob.pattern,
                 (&cons.pattern, g1),
                 (prob.t0 + h, q1, &self.ptil),
@@ -212,7 +212,7 @@ impl StepBackend for SparseBackend<'_> {
         lv: &mut [f64],
     ) -> Result<(), Error> {
         let mut sink = NodeSink::gradient(fq, lv);
-        self.prob.node.eval(t, q, v, &mut sink);
+        self.prob.node.get().eval(t, q, v, &mut sink);
         if sink.outside() {
             return Err(Error::outside_pattern());
         }
@@ -229,12 +229,12 @@ impl StepBackend for SparseBackend<'_> {
         v: &mut [f64],
         step: usize,
     ) -> Result<(), Error> {
-        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        let (node, pattern) = (self.prob.node.get(), &self.prob.pattern);
         self.velocity.solve(node, pattern, (t, q, p), v, step)
     }
 
     fn mass_sign(&mut self, at: (f64, &[f64], &[f64])) -> Result<f64, Error> {
-        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        let (node, pattern) = (self.prob.node.get(), &self.prob.pattern);
         self.velocity.check_mass(node, pattern, at)?;
         Ok(1.0)
     }
@@ -280,7 +280,7 @@ impl StepBackend for SparseBackend<'_> {
         d: (&[f64], &[f64]),
         dp: &mut [f64],
     ) -> Result<(), Error> {
-        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        let (node, pattern) = (self.prob.node.get(), &self.prob.pattern);
         self.velocity.momentum_tangent(node, pattern, at, d, dp)
     }
 
@@ -290,7 +290,7 @@ impl StepBackend for SparseBackend<'_> {
         d: (&[f64], &[f64]),
         dv: &mut [f64],
     ) -> Result<(), Error> {
-        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        let (node, pattern) = (self.prob.node.get(), &self.prob.pattern);
         self.velocity.velocity_tangent(node, pattern, at, d, dv)
     }
 
@@ -305,7 +305,7 @@ impl StepBackend for SparseBackend<'_> {
     fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
         let prob = &mut self.prob;
         match prob.cons.as_mut() {
-            Some(c) => c.residuals(prob.node, &prob.pattern, at),
+            Some(c) => c.residuals(prob.node.get(), &prob.pattern, at),
             None => Ok([0.0; 3]),
         }
     }
@@ -375,7 +375,7 @@ impl StepBackend for SparseBackend<'_> {
         y: &[f64],
         out: (&mut [f64], &mut [f64]),
     ) -> Result<(), Error> {
-        let (node, pattern) = (self.prob.node, &self.prob.pattern);
+        let (node, pattern) = (self.prob.node.get(), &self.prob.pattern);
         self.velocity.momentum_cotangent(node, pattern, at, y, out)
     }
 

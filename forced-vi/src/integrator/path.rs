@@ -12,7 +12,8 @@ use crate::MAX_KERNEL_STACK;
 #[cfg(feature = "sparse")]
 use crate::{
     backend::SparseBackend,
-    model::NodePattern,
+    model::{DualConstraints, NodePattern},
+    sparse::equations::NodeRef,
     sparse::{record_constraint_patterns, record_node_pattern},
 };
 
@@ -137,29 +138,39 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             (LinearPath::Auto, None) => return Ok(None),
             (_, Some(node)) => node,
         };
-        // A constrained model needs constraint kernels beside its node kernels.
+        // A constrained model whose node kernels do not evaluate its constraints gets them
+        // from its generic `constraints` with dual numbers (`DualConstraints`).
         let cons = self.model.constraint_count();
-        if cons > 0 && node.sparse_constraint_count() != cons {
-            return match self.linear_path {
-                LinearPath::Sparse => Err(Error::UnsupportedConstraints {
-                    message: "the model's sparse kernels do not evaluate its constraints \
-                              (SparseNode::sparse_constraint_count)",
-                }),
-                _ => Ok(None),
-            };
-        }
+        let node = if cons > 0 && node.sparse_constraint_count() != cons {
+            if node.sparse_constraint_count() != 0 {
+                return Err(Error::InvalidModel {
+                    message: format!(
+                        "the sparse kernels evaluate {} constraints, the model declares {cons}",
+                        node.sparse_constraint_count()
+                    ),
+                });
+            }
+            NodeRef::Owned(Box::new(DualConstraints {
+                model: self.model,
+                node,
+            }))
+        } else {
+            NodeRef::Borrowed(node)
+        };
         // The pattern at the initial state (at `v = 0` for initial momenta).
         let q = match init {
             InitialState::Velocity { q, .. } | InitialState::Momentum { q, .. } => q,
         };
         let mut pattern = match init {
-            InitialState::Velocity { q, v } => record_node_pattern(node, 0.0, q, v)?,
-            InitialState::Momentum { q, .. } => record_node_pattern(node, 0.0, q, &vec![0.0; N])?,
+            InitialState::Velocity { q, v } => record_node_pattern(node.get(), 0.0, q, v)?,
+            InitialState::Momentum { q, .. } => {
+                record_node_pattern(node.get(), 0.0, q, &vec![0.0; N])?
+            }
         };
         // The constraints' curvature adds to the diagonal node blocks: its entries join the
         // node pattern.
         let g_pattern = if cons > 0 {
-            let (g, curvature) = record_constraint_patterns(node, 0.0, q)?;
+            let (g, curvature) = record_constraint_patterns(node.get(), 0.0, q)?;
             let pairs = pattern.entries().chain(curvature).collect();
             pattern = NodePattern::from_pairs(N, pairs);
             Some(g)

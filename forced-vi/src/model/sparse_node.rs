@@ -412,3 +412,142 @@ impl<'a> ConstraintSink<'a> {
         self.outside
     }
 }
+
+/// Sparse constraint kernels for a model whose [`SparseNode`] kernels do not evaluate its
+/// constraints: `g`, `G` and the curvature from the model's generic
+/// [`ForcedLagrangian::constraints`](crate::ForcedLagrangian::constraints) with dual numbers,
+/// the node kernels the model's own.
+///
+/// `G` costs `N` evaluations of `g` with a first-order dual number, one per coordinate; every
+/// entry is computed, so an entry outside the recorded pattern is seen (and refused), never
+/// dropped. The curvature costs one evaluation with a hyper-dual number per pair `(a, c)` of
+/// coordinates that one constraint reads, as the pattern of `G` records them: it serves the
+/// Newton iteration only, whose residual (`g` and `Gᵀλ`) is exact either way. The pattern is
+/// recorded from the gradients at the state given and at a perturbed one, so that an entry
+/// that happens to vanish there is still recorded.
+pub(crate) struct DualConstraints<'a, M, const N: usize> {
+    /// The model.
+    pub(crate) model: &'a M,
+    /// Its own node kernels.
+    pub(crate) node: &'a dyn SparseNode,
+}
+
+impl<M: crate::ForcedLagrangian<N>, const N: usize> DualConstraints<'_, M, N> {
+    /// The gradients `∂g_k/∂q_a` at `(t, q)`, by `a`: `grads[a * m + k]`.
+    fn gradients(&self, t: f64, q: &[f64], grads: &mut [f64]) {
+        use num_dual::Dual64;
+        let m = self.model.constraint_count();
+        let mut x: Vec<Dual64> = q.iter().map(|&v| Dual64::from(v)).collect();
+        let mut g = vec![Dual64::from(0.0); m];
+        for a in 0..N.min(x.len()) {
+            x[a].eps = 1.0;
+            if let Ok(arr) = <&[Dual64; N]>::try_from(&x[..]) {
+                self.model.constraints(Dual64::from(t), arr, &mut g);
+            }
+            for (k, gk) in g.iter().enumerate() {
+                grads[a * m + k] = gk.eps;
+            }
+            x[a].eps = 0.0;
+        }
+    }
+}
+
+impl<M: crate::ForcedLagrangian<N>, const N: usize> SparseNode for DualConstraints<'_, M, N> {
+    fn dof(&self) -> usize {
+        self.node.dof()
+    }
+
+    fn eval(&self, t: f64, q: &[f64], v: &[f64], sink: &mut NodeSink<'_>) {
+        self.node.eval(t, q, v, sink)
+    }
+
+    fn lagrangian_value(&self, t: f64, q: &[f64], v: &[f64]) -> f64 {
+        self.node.lagrangian_value(t, q, v)
+    }
+
+    fn sparse_constraint_count(&self) -> usize {
+        self.model.constraint_count()
+    }
+
+    fn eval_constraints(&self, t: f64, q: &[f64], sink: &mut ConstraintSink<'_>) {
+        use num_dual::HyperDual64;
+        let m = self.model.constraint_count();
+        if q.len() != N {
+            sink.outside = true;
+            return;
+        }
+        let mut g = vec![0.0; m];
+        if let Ok(arr) = <&[f64; N]>::try_from(q) {
+            self.model.constraints(t, arr, &mut g);
+        }
+        for (k, x) in g.iter().enumerate() {
+            sink.add_value(k, *x);
+        }
+        if !sink.wants_derivatives() {
+            return;
+        }
+        let mut grads = vec![0.0; N * m];
+        self.gradients(t, q, &mut grads);
+        // The coordinates each constraint reads: the recorded pattern's rows, or, when
+        // recording, the gradients' nonzeros here and at a perturbed state.
+        let mut reads: Vec<Vec<usize>> = vec![Vec::new(); m];
+        match &sink.target {
+            ConstraintTarget::Jacobian { g_pattern, .. } => {
+                for (k, r) in reads.iter_mut().enumerate() {
+                    r.extend_from_slice(g_pattern.row(k));
+                }
+            }
+            _ => {
+                let mut probe = vec![0.0; N * m];
+                let shifted: Vec<f64> = q
+                    .iter()
+                    .enumerate()
+                    .map(|(a, x)| x + (1e-3 * (1.0 + x.abs())) * (0.7 + 0.37 * a as f64).sin())
+                    .collect();
+                self.gradients(t, &shifted, &mut probe);
+                for (k, r) in reads.iter_mut().enumerate() {
+                    r.extend(
+                        (0..N).filter(|&a| grads[a * m + k] != 0.0 || probe[a * m + k] != 0.0),
+                    );
+                }
+            }
+        }
+        for a in 0..N {
+            for k in 0..m {
+                let x = grads[a * m + k];
+                if x != 0.0 || reads[k].binary_search(&a).is_ok() {
+                    sink.add_gradient(k, a, x);
+                }
+            }
+        }
+        // The curvature, pair by pair over the coordinates one constraint reads (not asked
+        // for without multipliers).
+        if let ConstraintTarget::Jacobian { lambda, .. } = &sink.target {
+            if lambda.is_empty() {
+                return;
+            }
+        }
+        let mut pairs: Vec<(usize, usize)> = reads
+            .iter()
+            .flat_map(|r| r.iter().flat_map(move |&a| r.iter().map(move |&c| (a, c))))
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut x: Vec<HyperDual64> = q.iter().map(|&v| HyperDual64::from(v)).collect();
+        let mut h = vec![HyperDual64::from(0.0); m];
+        for (a, c) in pairs {
+            x[a].eps1 = 1.0;
+            x[c].eps2 = 1.0;
+            if let Ok(arr) = <&[HyperDual64; N]>::try_from(&x[..]) {
+                self.model.constraints(HyperDual64::from(t), arr, &mut h);
+            }
+            x[a].eps1 = 0.0;
+            x[c].eps2 = 0.0;
+            for (k, hk) in h.iter().enumerate() {
+                if reads[k].binary_search(&a).is_ok() && reads[k].binary_search(&c).is_ok() {
+                    sink.add_curvature(k, a, c, hk.eps1eps2);
+                }
+            }
+        }
+    }
+}

@@ -50,6 +50,9 @@ pub(crate) struct StepConstraints {
     pub(crate) curvature: Vec<f64>,
     /// Scratch: `G v`.
     gv: Vec<f64>,
+    /// The kernels wrote outside the recorded patterns (a defect of the model, or an entry
+    /// of `G` that the recording did not see).
+    pub(crate) outside: bool,
 }
 
 impl StepConstraints {
@@ -62,6 +65,7 @@ impl StepConstraints {
             jac: vec![0.0; pattern.nnz() * s],
             curvature: vec![0.0; node_nnz],
             gv: vec![0.0; m],
+            outside: false,
             pattern,
         }
     }
@@ -98,6 +102,7 @@ impl StepConstraints {
         );
         node.eval_constraints(t, x, &mut sink);
         if sink.outside() {
+            self.outside = true;
             return Err(NewtonFailure::NonFinite);
         }
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());

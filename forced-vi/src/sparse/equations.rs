@@ -10,10 +10,30 @@ use crate::sparse::constraints::StepConstraints;
 use crate::sparse::newton::SparseSystem;
 use crate::sparse::pattern::StepPattern;
 
+/// The node kernels of a run: the model's own, or an adapter the run owns (such as
+/// [`crate::model::DualConstraints`]).
+pub(crate) enum NodeRef<'a> {
+    /// The model's kernels.
+    Borrowed(&'a dyn SparseNode),
+    /// Kernels made for the run.
+    Owned(Box<dyn SparseNode + 'a>),
+}
+
+impl NodeRef<'_> {
+    /// The kernels.
+    #[inline(always)]
+    pub(crate) fn get(&self) -> &dyn SparseNode {
+        match self {
+            NodeRef::Borrowed(n) => *n,
+            NodeRef::Owned(n) => n.as_ref(),
+        }
+    }
+}
+
 /// The nonlinear system of one sparse step. Vectors of unknowns and residuals are
 /// coordinate-major (see [`crate::sparse::pattern`]); node vectors are `r` blocks of `n`.
 pub(crate) struct SparseStep<'a> {
-    pub(crate) node: &'a dyn SparseNode,
+    pub(crate) node: NodeRef<'a>,
     pub(crate) scheme: &'a Scheme,
     pub(crate) n: usize,
     pub(crate) h: f64,
@@ -42,7 +62,7 @@ impl<'a> SparseStep<'a> {
     /// Buffers for `node` and `scheme` on a recorded pattern; for a constrained model, with
     /// the pattern of `G` (whose curvature entries the node pattern holds).
     pub(crate) fn new(
-        node: &'a dyn SparseNode,
+        node: NodeRef<'a>,
         scheme: &'a Scheme,
         pattern: NodePattern,
         g_pattern: Option<NodePattern>,
@@ -106,7 +126,8 @@ impl<'a> SparseStep<'a> {
             }
             let lam: &[f64] = if curv { &self.lam } else { &[] };
             let x = self.control_x(j);
-            if let Err(e) = cons.eval(self.node, &self.pattern, (j, t, x), lam) {
+            if let Err(e) = cons.eval(self.node.get(), &self.pattern, (j, t, x), lam) {
+                self.outside |= cons.outside;
                 out = Err(e);
                 break;
             }
@@ -163,7 +184,7 @@ impl<'a> SparseStep<'a> {
             } else {
                 NodeSink::gradient(fq, lv)
             };
-            self.node.eval(t, x, v, &mut sink);
+            self.node.get().eval(t, x, v, &mut sink);
             if sink.outside() {
                 self.outside = true;
                 return Err(NewtonFailure::NonFinite);
