@@ -23,6 +23,9 @@ pub(crate) struct SparseBackend<'a> {
     /// The transposed step Jacobian's solver and where `J`'s values go in it, for
     /// adjoints (made on first use).
     adjoint: Option<(SparseLu, Vec<usize>)>,
+    /// The step Jacobian at the solution and its factors, for tangents (made on first
+    /// use), apart from the Newton's, which carry over to the next step.
+    tangent: Option<SparseNewton>,
     /// A constrained model: the saddle-point solve at a step's end, the impulse of the
     /// constraint forces over the last step and its end multipliers `h² λ_{s−1}` (as in
     /// the dense backend).
@@ -64,6 +67,7 @@ impl<'a> SparseBackend<'a> {
             newton: SparseNewton::new(lu, newton),
             velocity,
             adjoint: None,
+            tangent: None,
             impulse: vec![0.0; if saddle.is_some() { n } else { 0 }],
             ptil: vec![0.0; if saddle.is_some() { n } else { 0 }],
             mu: vec![0.0; m],
@@ -157,11 +161,19 @@ impl StepBackend for SparseBackend<'_> {
         scale: f64,
     ) -> Result<NewtonReport, StepFailure> {
         let prob = &mut self.prob;
+        let same_h = prob.h == h;
         prob.h = h;
         prob.t0 = t0;
         prob.q0.copy_from_slice(q0);
         prob.p0.copy_from_slice(p0);
-        self.newton.invalidate();
+        // Simplified Newton across steps: a step of the same size starts from the factors
+        // of the last Jacobian (a sparse LU costs more than the rest of a step), which the
+        // iteration refreshes when they contract slowly (see `crate::newton`). Not for
+        // one-iteration solves (the error estimate's), whose iterate must be a full Newton
+        // step.
+        if !(same_h && self.newton.options().max_iterations > 1) {
+            self.newton.invalidate();
+        }
         let solved = self.newton.solve(prob, &mut self.z, scale);
         let outside = prob.outside;
         match solved {
@@ -246,8 +258,19 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     fn linearize(&mut self) -> Result<(), StepFailure> {
+        if self.tangent.is_none() {
+            let lu = self
+                .newton
+                .lu()
+                .with_same_pattern()
+                .map_err(|_| StepFailure::Newton(NewtonFailure::SingularJacobian))?;
+            self.tangent = Some(SparseNewton::new(lu, *self.newton.options()));
+        }
+        let Some(tangent) = self.tangent.as_mut() else {
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+        };
         let prob = &mut self.prob;
-        self.newton.factor_at(prob, &self.z).map_err(|f| {
+        tangent.factor_at(prob, &self.z).map_err(|f| {
             if prob.outside {
                 StepFailure::OutsidePattern
             } else {
@@ -271,7 +294,10 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     fn solve_linearized(&mut self, b: &mut [f64]) {
-        self.newton.solve_factored(b);
+        match self.tangent.as_mut() {
+            Some(t) => t.solve_factored(b),
+            None => b.fill(f64::NAN),
+        }
     }
 
     fn momentum_tangent(
@@ -327,9 +353,11 @@ impl StepBackend for SparseBackend<'_> {
 
     fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
         self.linearize()?;
+        let Some(tangent) = self.tangent.as_ref() else {
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+        };
         if self.adjoint.is_none() {
-            let t = self
-                .newton
+            let t = tangent
                 .lu()
                 .transposed()
                 .map_err(|_| StepFailure::Newton(NewtonFailure::SingularJacobian))?;
@@ -338,7 +366,7 @@ impl StepBackend for SparseBackend<'_> {
         let Some((lu_t, map)) = self.adjoint.as_mut() else {
             return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
         };
-        self.newton.lu().fill_transposed(lu_t, map);
+        tangent.lu().fill_transposed(lu_t, map);
         lu_t.factor().map_err(StepFailure::Newton)
     }
 

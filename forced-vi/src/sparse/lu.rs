@@ -143,6 +143,11 @@ impl SparseLu {
         (self.skip, self.backoff) = (0, 0);
     }
 
+    /// A solver for a matrix of the same pattern (zero values).
+    pub(crate) fn with_same_pattern(&self) -> Result<SparseLu, AnalysisFailed> {
+        SparseLu::new(self.n, self.col_ptr.clone(), self.row_idx.clone())
+    }
+
     /// A solver for the transposed matrix (zero values), and where each of this matrix's
     /// values goes in it ([`SparseLu::fill_transposed`]).
     pub(crate) fn transposed(&self) -> Result<(SparseLu, Vec<usize>), AnalysisFailed> {
