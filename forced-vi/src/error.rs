@@ -246,8 +246,11 @@ pub enum Error {
         /// What overflowed: `q`, `p`, `v`, `energy`, `energy_balance` or `state`.
         quantity: &'static str,
     },
-    /// The Newton solve of a step failed (after any subdivisions).
-    #[error("newton failed at step {step}, t = {t}: {failure}")]
+    /// The Newton solve of a step failed (after any subdivisions). Besides a model that
+    /// is singular or not smooth there, the usual cause is a step beyond the scheme's
+    /// stability limit for the model's fastest mode (about `h ω ≤ 2` for `lobatto2`,
+    /// larger with more stages): the message says so.
+    #[error("newton failed at step {step}, t = {t}: {failure} (a smaller step, tolerances or more stages may help: a step beyond the scheme's stability limit for the model's fastest mode does not converge)")]
     NewtonFailed {
         /// The step being computed (1-based: step k goes from t_{k−1} to t_k).
         step: usize,
