@@ -11,4 +11,4 @@ pub mod scenes;
 
 // The models are a package of their own (`models/`), so that the tests that need only them
 // do not wait for this library; these paths stay as they were.
-pub use forced_vi_models::{handwritten, large, models};
+pub use forced_vi_models::{handwritten, large, models, rigid_chain};
