@@ -873,3 +873,46 @@ fn constraint_macro_model_runs_on_the_sparse_backend_with_dual_number_constraint
     );
     assert!(worst < 1e-13, "{worst:.1e}");
 }
+
+#[test]
+fn constraint_sparse_bad_input_gets_typed_errors() {
+    const N: usize = 512;
+    let model = RigidChain::<N>::default();
+    let InitialState::Velocity { q, v } = model.initial() else {
+        panic!("velocity form")
+    };
+    // Not finite: a typed error from the sparse projection, not a panic.
+    let mut bad = q;
+    bad[7] = f64::NAN;
+    assert!(InitialState::projected(&model, bad, v).is_err());
+    let held = HeldChain::<64> {
+        k: 1.0,
+        beta: 0.5,
+        c: 0.05,
+    };
+    let mut q_held = [0.1; 64];
+    q_held[0] = f64::INFINITY;
+    assert!(InitialState::projected(&held, q_held, [0.0; 64]).is_err());
+    // A run from data off the constraints keeps its typed error on the sparse backend.
+    let mut off = q;
+    off[100] += 1e-3;
+    let run = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
+        .expect("integrator")
+        .run(InitialState::from_velocity(off, v), 0.01);
+    assert!(matches!(
+        run.map(|_| ()).map_err(|f| f.error),
+        Err(Error::InconsistentInitialState {
+            what: "position",
+            ..
+        })
+    ));
+    // A non-finite parameter is the model's own typed error.
+    let broken = RigidChain::<N> {
+        l: f64::NAN,
+        ..model
+    };
+    assert!(matches!(
+        Integrator::new(&broken, Scheme::lobatto(3).expect("scheme"), 1e-3).map(|_| ()),
+        Err(Error::NonFiniteParameter { .. })
+    ));
+}
