@@ -516,7 +516,8 @@
 //! - **every reported number is finite**: `q`, `p`, `v`, the energy, the energy balance and
 //!   the residual.
 //!
-//! With tolerances ([`Integrator::tolerances`], [`Integrator::adaptive`]), every step's
+//! With tolerances ([`Integrator::tolerances`], [`Integrator::adaptive`],
+//! [`Integrator::auto`], which picks the Lobatto scheme from the tolerance too), every step's
 //! estimated local error per unit step is within them, so the error follows the tolerance
 //! (measured, not proved: an estimate can be fooled).
 //!
