@@ -37,7 +37,7 @@ fn scheme(name: &str) -> Scheme {
 fn run<M: ForcedLagrangian<2>>(integ: &Integrator<'_, M, 2>) -> f64 {
     let mut q = 0.0;
     integ
-        .for_each_step(INIT, STEPS as f64 * H, |r| q = r.q[0])
+        .solve(INIT, STEPS as f64 * H, output::each_step(|r| q = r.q[0]))
         .expect("run");
     q
 }
@@ -47,11 +47,15 @@ fn allocs_per_step<M: ForcedLagrangian<2>>(integ: &Integrator<'_, M, 2>) -> f64 
     let mut first = None;
     let mut last = 0;
     let stats = integ
-        .for_each_step(INIT, 10.0, |_| {
-            let c = alloc_count::allocations();
-            first.get_or_insert(c);
-            last = c;
-        })
+        .solve(
+            INIT,
+            10.0,
+            output::each_step(|_| {
+                let c = alloc_count::allocations();
+                first.get_or_insert(c);
+                last = c;
+            }),
+        )
         .expect("run");
     (last - first.unwrap_or(last)) as f64 / stats.steps as f64
 }

@@ -5,7 +5,11 @@ use forced_vi_scenes::models::CoupledVanDerPol;
 fn main() -> Result<(), forced_vi::Error> {
     let run = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(4)?, 0.1)?
         .tolerances(1e-8, 1e-8)? // rtol, atol: the run picks its steps
-        .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 10.0)
+        .solve(
+            InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+            10.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
     println!(
         "{} steps, {} rejected",

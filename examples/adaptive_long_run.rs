@@ -8,13 +8,17 @@ fn ledger(integ: &Integrator<'_, CoupledVanDerPol, 2>, label: &str) {
     let (mut worst, mut at_100, mut last) = (0.0f64, 0.0, 0.0);
     let start = std::time::Instant::now();
     let stats = integ
-        .for_each_step(init, 1000.0, |r| {
-            worst = worst.max(r.energy_balance.abs());
-            if r.t <= 100.0 {
-                at_100 = r.energy_balance;
-            }
-            last = r.energy_balance;
-        })
+        .solve(
+            init,
+            1000.0,
+            output::each_step(|r| {
+                worst = worst.max(r.energy_balance.abs());
+                if r.t <= 100.0 {
+                    at_100 = r.energy_balance;
+                }
+                last = r.energy_balance;
+            }),
+        )
         .expect("the run completes");
     println!(
         "{label}: steps {}, rejected {}, {:.2} s, |balance| max {worst:.2e}, at t≈100 {at_100:.2e}, at T {last:.2e}",

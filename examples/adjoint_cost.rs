@@ -3,7 +3,7 @@
 //! `ℓ = ½|q_T|²` it times, median of 3 runs:
 //! - the run alone (`final_state`);
 //! - the adjoint gradient with respect to the 2n initial values and the 4 parameters of the
-//!   macro's chain (`adjoint_gradient`), and the memory its tape keeps;
+//!   macro's chain (`output::adjoint`), and the memory its tape keeps;
 //! - the same model written by hand, which declares no parameters (the adjoint without
 //!   parameter terms), to show what the parameters add;
 //! - the forward sensitivities (`sensitivities`, 2n + 4 columns) at n = 64, 128 and 256,
@@ -40,11 +40,13 @@ fn forward<const N: usize>() -> Result<(), forced_vi::Error> {
         integ.final_state(init, T).expect("run");
     });
     let sens = median_ms(|| {
-        integ.sensitivities(init, T).expect("sensitivities");
+        integ
+            .solve(init, T, output::Tangents)
+            .expect("sensitivities");
     });
     let adj = median_ms(|| {
         integ
-            .adjoint_gradient(init, T, |e| (e.q, SVector::zeros()))
+            .solve(init, T, output::adjoint(|e| (e.q, SVector::zeros())))
             .expect("adjoint");
     });
     println!(
@@ -72,7 +74,7 @@ fn main() -> Result<(), forced_vi::Error> {
     let adj = median_ms(|| {
         grad = Some(
             integ
-                .adjoint_gradient(init, T, |e| (e.q, SVector::zeros()))
+                .solve(init, T, output::adjoint(|e| (e.q, SVector::zeros())))
                 .expect("adjoint"),
         );
     });
@@ -81,7 +83,7 @@ fn main() -> Result<(), forced_vi::Error> {
         hand.final_state(init, T).expect("run");
     });
     let hand_adj = median_ms(|| {
-        hand.adjoint_gradient(init, T, |e| (e.q, SVector::zeros()))
+        hand.solve(init, T, output::adjoint(|e| (e.q, SVector::zeros())))
             .expect("adjoint");
     });
     println!(

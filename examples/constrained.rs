@@ -92,13 +92,17 @@ fn main() -> Result<(), forced_vi::Error> {
     let integ = Integrator::new(&cart, Scheme::lobatto(2)?, h)?;
     let (mut first, mut last) = (0.0f64, 0.0f64);
     integ
-        .for_each_step(cartesian_start(), steps as f64 * h, |r| {
-            if r.step < steps / 10 {
-                first = first.max(r.constraint_residual);
-            } else if r.step >= steps - steps / 10 {
-                last = last.max(r.constraint_residual);
-            }
-        })
+        .solve(
+            cartesian_start(),
+            steps as f64 * h,
+            output::each_step(|r| {
+                if r.step < steps / 10 {
+                    first = first.max(r.constraint_residual);
+                } else if r.step >= steps - steps / 10 {
+                    last = last.max(r.constraint_residual);
+                }
+            }),
+        )
         .map_err(|f| f.error)?;
     println!(
         "lobatto2, h = {h}, {steps} steps: max(|g|, |G v|) = {first:.1e} in the first tenth, {last:.1e} in the last (l² = {:.2})",
@@ -145,7 +149,7 @@ fn main() -> Result<(), forced_vi::Error> {
         for k in 0..4 {
             let h = h0 / 2f64.powi(k);
             let run = Integrator::new(&cart, Scheme::lobatto(s)?, h)?
-                .run(cartesian_start(), t_final)
+                .solve(cartesian_start(), t_final, output::Records)
                 .map_err(|f| f.error)?;
             // Exact mean force over each step, from the angle form's dense output.
             let mut times = Vec::new();
@@ -156,7 +160,11 @@ fn main() -> Result<(), forced_vi::Error> {
                 }
             }
             let states = fine
-                .sample(InitialState::from_velocity([THETA0], [OMEGA0]), &times)
+                .solve(
+                    InitialState::from_velocity([THETA0], [OMEGA0]),
+                    t_final,
+                    output::Samples(&times),
+                )
                 .map_err(|f| f.error)?;
             let mut worst = 0.0f64;
             for (r, chunk) in run.records.iter().skip(1).zip(states.chunks(gauss.len())) {

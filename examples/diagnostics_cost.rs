@@ -1,4 +1,4 @@
-//! Cost per step with full diagnostics (`for_each_step`: records, velocity solve, energy,
+//! Cost per step with full diagnostics (`output::each_step`: records, velocity solve, energy,
 //! work) against the final state alone (`final_state`), coupled van der Pol, h = 0.01,
 //! T = 100: `cargo run --release --example diagnostics_cost`. Medians of 9 interleaved runs.
 use forced_vi::prelude::*;
@@ -13,7 +13,7 @@ fn main() {
         let (mut full, mut lean) = (vec![], vec![]);
         for _ in 0..9 {
             let t0 = std::time::Instant::now();
-            let st = integ.for_each_step(init, 100.0, |_| {}).unwrap();
+            let st = integ.solve(init, 100.0, output::each_step(|_| {})).unwrap();
             full.push(t0.elapsed().as_secs_f64() / st.steps as f64);
             let t0 = std::time::Instant::now();
             let end = integ.final_state(init, 100.0).unwrap();

@@ -64,7 +64,11 @@ fn main() -> Result<(), Box<dyn Error>> {
         lambda: 0.8,
     };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-        .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 10.0)
+        .solve(
+            InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+            10.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
 
     let csv_path = out.join("trajectory.csv");

@@ -23,7 +23,11 @@ fn main() -> Result<(), forced_vi::Error> {
         lambda: 0.8,
     };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-        .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+            1.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
     for r in run.records.iter().step_by(25) {
         println!(

@@ -1,5 +1,5 @@
 //! The Poincaré section of the chaotic driven Duffing oscillator: the state `(x, ẋ)` sampled
-//! once per driving period over 10⁴ periods (`Integrator::sample`, the steps are not kept).
+//! once per driving period over 10⁴ periods (`output::Samples`, the steps are not kept).
 //! `cargo run --release --example poincare [OUT.svg]` (default `report/poincare_duffing.svg`).
 use forced_vi::prelude::*;
 use forced_vi_scenes::models::DrivenDuffing;
@@ -17,7 +17,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let times: Vec<f64> = (100..=periods).map(|k| k as f64 * period).collect();
     let start = std::time::Instant::now();
     let samples = Integrator::new(&model, Scheme::lobatto(3)?, period / 100.0)?
-        .sample(InitialState::from_velocity([1.0], [0.0]), &times)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            periods as f64 * period,
+            output::Samples(&times),
+        )
         .map_err(|f| f.error)?;
     println!(
         "{} section points from {periods} periods in {:.2} s",

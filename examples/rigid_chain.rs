@@ -26,7 +26,9 @@ fn main() -> Result<(), forced_vi::Error> {
             })
             .collect();
         per_step.sort_by(f64::total_cmp);
-        let run = integ.run(init, 0.2).map_err(|f| f.error)?;
+        let run = integ
+            .solve(init, 0.2, output::Records)
+            .map_err(|f| f.error)?;
         let worst = run
             .records
             .iter()
@@ -40,7 +42,9 @@ fn main() -> Result<(), forced_vi::Error> {
     }
     let auto = Integrator::auto(&model, 1e-8, 1e-8)?;
     let t0 = Instant::now();
-    let run = auto.run(init, 1.0).map_err(|f| f.error)?;
+    let run = auto
+        .solve(init, 1.0, output::Records)
+        .map_err(|f| f.error)?;
     let worst = run
         .records
         .iter()

@@ -13,10 +13,10 @@ fn main() {
             for _ in 0..9 {
                 let t0 = std::time::Instant::now();
                 let st = integ
-                    .for_each_step(
+                    .solve(
                         InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
                         100.0,
-                        |_| {},
+                        output::each_step(|_| {}),
                     )
                     .unwrap();
                 times.push(t0.elapsed().as_secs_f64() / st.steps as f64);

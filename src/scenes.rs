@@ -12,7 +12,7 @@
 //! To add a scene: add the model (in [`crate::models`]), add it to `scripts/reference.py` and
 //! regenerate the references, then add one `scene!(...)` line to [`all`].
 
-use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme};
+use forced_vi::{output, ForcedLagrangian, InitialState, Integrator, Scheme};
 use nalgebra::DMatrix;
 
 use crate::baselines::{self, Baseline, BaselineError, OdeSystem};
@@ -123,7 +123,7 @@ pub trait Scene: Send + Sync {
     /// `points` times `t ∈ (0, T)` of `‖Φ_q(T, t)‖∞`, the rows in `q_T` of the tangent map
     /// from `(q, p)` at `t` to `(q, p)` at `T` (max row sum). Local errors of size `δ` per
     /// unit step add up to a final error of about `δ` times this. From
-    /// [`Integrator::sensitivities`] (lobatto4, 4000 steps over the run).
+    /// [`forced_vi::output::Tangents`] (lobatto4, 4000 steps over the run).
     fn amplification(&self, points: usize) -> Result<f64, SceneError>;
     /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
     fn balance_variational(
@@ -275,9 +275,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
         let (q0, v0) = self.start(member)?;
         let mut last = None;
         let stats = integ
-            .for_each_step(InitialState::from_velocity(q0, v0), self.t_final, |r| {
-                last = Some((r.q, r.p, r.energy));
-            })
+            .solve(
+                InitialState::from_velocity(q0, v0),
+                self.t_final,
+                output::each_step(|r| {
+                    last = Some((r.q, r.p, r.energy));
+                }),
+            )
             .map_err(|f| f.error)?;
         let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
             t_final: self.t_final,
@@ -368,7 +372,9 @@ where
         };
         let p0_inv = to_p(0.0, &q0, &v0).try_inverse().ok_or_else(singular)?;
         let tangent = |t: f64| -> Result<DMatrix<f64>, SceneError> {
-            let s = integ.sensitivities(init, t).map_err(|f| f.error)?;
+            let s = integ
+                .solve(init, t, output::Tangents)
+                .map_err(|f| f.error)?;
             Ok(to_p(s.t, s.q.as_slice(), s.v.as_slice()) * s.wrt_initial * &p0_inv)
         };
         let end = tangent(self.t_final)?;
@@ -469,13 +475,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
         let mut sampler = Sampler::new(t_final, samples);
         let mut last = (0.0, 0.0);
         let stats = integ
-            .for_each_step(InitialState::from_velocity(q0, v0), t_final, |r| {
-                if sampler.take(r.t) {
-                    out.t.push(r.t);
-                    out.balance.push(r.energy_balance);
-                }
-                last = (r.t, r.energy_balance);
-            })
+            .solve(
+                InitialState::from_velocity(q0, v0),
+                t_final,
+                output::each_step(|r| {
+                    if sampler.take(r.t) {
+                        out.t.push(r.t);
+                        out.balance.push(r.energy_balance);
+                    }
+                    last = (r.t, r.energy_balance);
+                }),
+            )
             .map_err(|f| f.error)?;
         if out.t.last() != Some(&last.0) {
             out.t.push(last.0);

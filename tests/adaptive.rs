@@ -19,7 +19,11 @@ const PAPER_V0: [f64; 2] = [0.0, 4.0];
 fn fixed(scheme: &Scheme, h: f64, t: f64) -> [f64; 4] {
     let run = Integrator::new(&CoupledVanDerPol::PAPER, scheme.clone(), h)
         .unwrap()
-        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), t)
+        .solve(
+            InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+            t,
+            output::Records,
+        )
         .unwrap();
     let end = run.last().unwrap();
     [end.q[0], end.q[1], end.p[0], end.p[1]]
@@ -44,7 +48,9 @@ fn end_state<M: ForcedLagrangian<2>>(
     if adaptive {
         integ = integ.tolerances(0.0, 1e6).unwrap();
     }
-    let run = integ.run(InitialState::from_velocity(q0, v0), t).unwrap();
+    let run = integ
+        .solve(InitialState::from_velocity(q0, v0), t, output::Records)
+        .unwrap();
     if adaptive {
         assert_eq!(run.records.len(), 2, "one step");
     }
@@ -207,14 +213,14 @@ fn dense_output_order() {
     let (q0, v0) = ([1.0, 0.0], [0.0, 0.5]);
     let fine = Integrator::new(&model, Scheme::lobatto(5).unwrap(), 1e-3)
         .unwrap()
-        .run(InitialState::from_velocity(q0, v0), 2.0)
+        .solve(InitialState::from_velocity(q0, v0), 2.0, output::Records)
         .unwrap();
     for (s, expected) in [(2, 2.0), (3, 4.0), (5, 4.0)] {
         let (mut hs, mut errs) = (Vec::new(), Vec::new());
         for h in [0.2, 0.1, 0.05, 0.025] {
             let run = Integrator::new(&model, Scheme::lobatto(s).unwrap(), h)
                 .unwrap()
-                .run(InitialState::from_velocity(q0, v0), 2.0)
+                .solve(InitialState::from_velocity(q0, v0), 2.0, output::Records)
                 .unwrap();
             // Times inside the steps, off the fine run's grid too.
             let times: Vec<f64> = (0..40).map(|k| 0.0137 + 0.049 * k as f64).collect();
@@ -241,8 +247,13 @@ fn adaptive_output_at_requested_times() {
         .tolerances(1e-10, 1e-10)
         .unwrap();
     let times = [0.0, 0.1, 0.25, 0.5, 0.75, 1.0];
+    let init = InitialState::from_velocity(PAPER_Q0, PAPER_V0);
     let samples = integ
-        .sample(InitialState::from_velocity(PAPER_Q0, PAPER_V0), &times)
+        .solve(
+            InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+            1.0,
+            output::Samples(&times),
+        )
         .unwrap();
     assert_eq!(samples.len(), times.len());
     let end = fixed(&Scheme::lobatto(5).unwrap(), 1e-3, 1.0);
@@ -252,8 +263,21 @@ fn adaptive_output_at_requested_times() {
     let last = samples.last().unwrap();
     assert!((last.q[0] - end[0]).abs() < 1e-8 && (last.q[1] - end[1]).abs() < 1e-8);
     // Unordered or negative times are typed errors.
-    let bad = integ.sample(InitialState::from_velocity(PAPER_Q0, PAPER_V0), &[0.5, 0.2]);
+    let bad = integ.solve(
+        InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+        1.0,
+        output::Samples(&[0.5, 0.2]),
+    );
     assert!(matches!(bad.unwrap_err().error, Error::UnorderedTimes));
+    // So is a time past the end of the run, before any step.
+    let past = integ.solve(init, 0.5, output::Samples(&[0.25, 0.75]));
+    let past = past.unwrap_err();
+    assert!(matches!(past.error, Error::UnorderedTimes) && past.stats.steps == 0);
+    let neg = integ.solve(init, 1.0, output::Samples(&[-0.1, 0.5]));
+    assert!(matches!(
+        neg.unwrap_err().error,
+        Error::InvalidFinalTime { .. }
+    ));
 }
 
 #[test]
@@ -263,7 +287,11 @@ fn adaptive_runs_end_on_time_with_a_small_energy_balance() {
             .unwrap()
             .tolerances(tol, tol)
             .unwrap()
-            .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 10.0)
+            .solve(
+                InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+                10.0,
+                output::Records,
+            )
             .unwrap();
         let end = run.last().unwrap();
         assert_eq!(end.t, 10.0);
@@ -284,7 +312,11 @@ fn adaptive_typed_errors_keep_the_steps_before_them() {
         .unwrap()
         .max_steps(20);
     let f = integ
-        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 10.0)
+        .solve(
+            InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+            10.0,
+            output::Records,
+        )
         .unwrap_err();
     assert!(
         matches!(f.error, Error::MaxStepsReached { steps: 20, .. }),
@@ -297,7 +329,11 @@ fn adaptive_typed_errors_keep_the_steps_before_them() {
         .unwrap()
         .tolerances(0.0, 1e-300)
         .unwrap()
-        .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 1.0)
+        .solve(
+            InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+            1.0,
+            output::Records,
+        )
         .unwrap_err();
     assert!(
         matches!(f.error, Error::StepSizeTooSmall { .. }),
@@ -327,7 +363,11 @@ fn adaptive_first_step_is_automatic() {
             )
             .unwrap();
             let run = integ
-                .run(InitialState::from_velocity(PAPER_Q0, PAPER_V0), 1.0)
+                .solve(
+                    InitialState::from_velocity(PAPER_Q0, PAPER_V0),
+                    1.0,
+                    output::Records,
+                )
                 .unwrap();
             let end = run.last().unwrap();
             let exact = fixed(&Scheme::lobatto(5).unwrap(), 1e-3, 1.0);
@@ -356,14 +396,22 @@ fn adaptive_step_bounds() {
         )
         .unwrap()
     };
-    let run = base().max_step(0.01).unwrap().run(init, 1.0).unwrap();
+    let run = base()
+        .max_step(0.01)
+        .unwrap()
+        .solve(init, 1.0, output::Records)
+        .unwrap();
     assert!(run
         .records
         .windows(2)
         .all(|w| w[1].t - w[0].t <= 0.01 * (1.0 + 1e-12)));
     assert!(run.stats.steps >= 100);
     // This run's steps are about 0.03 (33 steps): a floor of 0.1 cannot be kept.
-    let f = base().min_step(0.1).unwrap().run(init, 1.0).unwrap_err();
+    let f = base()
+        .min_step(0.1)
+        .unwrap()
+        .solve(init, 1.0, output::Records)
+        .unwrap_err();
     assert!(
         matches!(f.error, Error::StepSizeTooSmall { .. }),
         "{}",
@@ -401,7 +449,7 @@ fn adaptive_step_bounds() {
         1e-300,
     )
     .unwrap()
-    .run(init, 1.0)
+    .solve(init, 1.0, output::Records)
     .unwrap_err();
     assert!(
         matches!(f.error, Error::StepSizeTooSmall { t, .. } if t == 0.0),

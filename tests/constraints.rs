@@ -3,6 +3,7 @@
 //! momentum of a symmetric constrained model, and the typed errors.
 //! `cargo test --workspace --release --test constraints`.
 
+use forced_vi::output;
 use forced_vi::{Error, ForcedLagrangian, InitialState, Integrator, LinearPath, Scalar, Scheme};
 
 const M: f64 = 1.0;
@@ -125,17 +126,22 @@ fn constraint_residuals_stay_at_round_off() {
         let mut reported = 0.0f64;
         let mut tension = f64::INFINITY;
         integ
-            .for_each_step(cartesian_start(), 50.0, |r| {
-                let g = 0.5 * (r.q[0] * r.q[0] + r.q[1] * r.q[1] - L * L);
-                let gv = r.q[0] * r.v[0] + r.q[1] * r.v[1];
-                worst = (worst.0.max(g.abs()), worst.1.max(gv.abs()));
-                reported = reported.max(r.constraint_residual);
-                if r.step > 0 {
-                    // The rod pulls towards the pivot: the force points along −q.
-                    tension = tension
-                        .min(-(r.constraint_force[0] * r.q[0] + r.constraint_force[1] * r.q[1]));
-                }
-            })
+            .solve(
+                cartesian_start(),
+                50.0,
+                output::each_step(|r| {
+                    let g = 0.5 * (r.q[0] * r.q[0] + r.q[1] * r.q[1] - L * L);
+                    let gv = r.q[0] * r.v[0] + r.q[1] * r.v[1];
+                    worst = (worst.0.max(g.abs()), worst.1.max(gv.abs()));
+                    reported = reported.max(r.constraint_residual);
+                    if r.step > 0 {
+                        // The rod pulls towards the pivot: the force points along −q.
+                        tension = tension.min(
+                            -(r.constraint_force[0] * r.q[0] + r.constraint_force[1] * r.q[1]),
+                        );
+                    }
+                }),
+            )
             .expect("run");
         assert!(reported <= worst.0.max(worst.1) * 1.01 + 1e-300 && reported > 0.0);
         assert!(tension > 0.0, "the rod pushes: {tension}");
@@ -188,7 +194,7 @@ fn constraint_spherical_pendulum_keeps_its_vertical_momentum() {
         let model = SphericalPendulum { drag };
         let run = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
             .expect("integrator")
-            .run(init, 20.0)
+            .solve(init, 20.0, output::Records)
             .expect("run");
         let first = lz(&run.records[0].q, &run.records[0].p);
         let drift = run
@@ -260,13 +266,13 @@ fn constraint_errors_are_typed() {
     // Derivatives do not carry the multipliers yet: refused, not wrong.
     assert!(matches!(
         integ
-            .sensitivities(cartesian_start(), 1.0)
+            .solve(cartesian_start(), 1.0, output::Tangents)
             .map_err(|f| f.error),
         Err(Error::UnsupportedConstraints { .. })
     ));
     assert!(matches!(
         integ
-            .adjoint_gradient(cartesian_start(), 1.0, |e| (e.q, e.v))
+            .solve(cartesian_start(), 1.0, output::adjoint(|e| (e.q, e.v)))
             .map_err(|f| f.error),
         Err(Error::UnsupportedConstraints { .. })
     ));
@@ -468,16 +474,21 @@ fn constraint_dense_output_and_ensembles_work() {
     // Many times, spread across the steps, so that each run's worst point is near a
     // step's middle.
     let times: Vec<f64> = (0..397).map(|k| k as f64 * 0.005_03 + 0.001).collect();
+    let t_last = times[times.len() - 1];
     let angle = Integrator::new(&AnglePendulum, Scheme::lobatto(5).expect("s"), 1e-3)
         .expect("integrator")
-        .sample(InitialState::from_velocity([THETA0], [OMEGA0]), &times)
+        .solve(
+            InitialState::from_velocity([THETA0], [OMEGA0]),
+            t_last,
+            output::Samples(&times),
+        )
         .expect("reference samples");
     let worst = |max_step: f64| {
         let samples = Integrator::adaptive(&model, Scheme::lobatto(4).expect("s"), 1e-10, 1e-10)
             .expect("integrator")
             .max_step(max_step)
             .expect("bound")
-            .sample(cartesian_start(), &times)
+            .solve(cartesian_start(), t_last, output::Samples(&times))
             .expect("samples");
         let mut worst = 0.0f64;
         for (s, a) in samples.iter().zip(&angle) {
@@ -504,7 +515,7 @@ fn constraint_dense_output_and_ensembles_work() {
         .collect();
     let ends = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
         .expect("integrator")
-        .run_ensemble_final(&members, 2.0);
+        .ensemble(&members, 2.0, output::Final);
     for end in &ends {
         let end = end.as_ref().expect("member");
         let g = 0.5 * (end.q[0] * end.q[0] + end.q[1] * end.q[1] - L * L);
@@ -563,7 +574,7 @@ fn chain_run<const N: usize>(
     Integrator::new(model, scheme, h)
         .expect("integrator")
         .linear_path(path)
-        .run(model.initial(), t)
+        .solve(model.initial(), t, output::Records)
         .expect("run")
 }
 
@@ -699,7 +710,9 @@ fn constraint_chain_256_links_adaptive_dense_output_and_projection_on_the_sparse
             integrator.path_for(&model.initial()).expect("path"),
             LinearPath::Sparse
         );
-        let run = integrator.run(model.initial(), 0.5).expect("adaptive run");
+        let run = integrator
+            .solve(model.initial(), 0.5, output::Records)
+            .expect("adaptive run");
         let end = run.last().expect("end");
         let mid = run.at(0.25).expect("dense output");
         let (eq, ev) = (dist(end.q.as_slice(), &q50), dist(end.v.as_slice(), &v50));
@@ -737,7 +750,11 @@ fn constraint_chain_256_links_adaptive_dense_output_and_projection_on_the_sparse
     }
     let bad = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
         .expect("integrator")
-        .run(InitialState::from_velocity(q_off, v_off), 0.01);
+        .solve(
+            InitialState::from_velocity(q_off, v_off),
+            0.01,
+            output::Records,
+        );
     assert!(matches!(
         bad.map(|_| ()).map_err(|f| f.error),
         Err(Error::InconsistentInitialState { .. })
@@ -745,7 +762,7 @@ fn constraint_chain_256_links_adaptive_dense_output_and_projection_on_the_sparse
     let fixed = InitialState::projected(&model, q_off, v_off).expect("projection");
     let run = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
         .expect("integrator")
-        .run(fixed, 0.01)
+        .solve(fixed, 0.01, output::Records)
         .expect("run from projected data");
     let worst = run
         .records
@@ -790,7 +807,7 @@ fn chain_run_of<M: ForcedLagrangian<N>, const N: usize>(
     Integrator::new(model, scheme, 0.01)
         .expect("integrator")
         .linear_path(path)
-        .run(init, 0.5)
+        .solve(init, 0.5, output::Records)
         .expect("run")
 }
 
@@ -861,7 +878,9 @@ fn constraint_macro_model_runs_on_the_sparse_backend_with_dual_number_constraint
     let integ =
         Integrator::new(&large, Scheme::lobatto(3).expect("scheme"), 0.01).expect("integrator");
     assert_eq!(integ.path_for(&init).expect("path"), LinearPath::Sparse);
-    let run = integ.run(init, 0.2).expect("run at N = 1024");
+    let run = integ
+        .solve(init, 0.2, output::Records)
+        .expect("run at N = 1024");
     let worst = run
         .records
         .iter()
@@ -898,7 +917,7 @@ fn constraint_sparse_bad_input_gets_typed_errors() {
     off[100] += 1e-3;
     let run = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1e-3)
         .expect("integrator")
-        .run(InitialState::from_velocity(off, v), 0.01);
+        .solve(InitialState::from_velocity(off, v), 0.01, output::Records);
     assert!(matches!(
         run.map(|_| ()).map_err(|f| f.error),
         Err(Error::InconsistentInitialState {

@@ -29,10 +29,10 @@ fn errors<M: ForcedLagrangian<1> + Sync>(
             let mut last = [f64::NAN; 3];
             Integrator::new(model, Scheme::lobatto(s).unwrap(), h)
                 .unwrap()
-                .for_each_step(
+                .solve(
                     InitialState::from_velocity([start.q[0]], [start.v[0]]),
                     t_final,
-                    |r| last = [r.q[0], r.p[0], r.energy_balance],
+                    output::each_step(|r| last = [r.q[0], r.p[0], r.energy_balance]),
                 )
                 .unwrap_or_else(|f| panic!("lobatto{s} h={h}: {}", f.error));
             let eq = (last[0] - end.q[0]).abs();
@@ -130,9 +130,10 @@ fn driven_kapitza_pendulum_stays_upright_adaptively() {
         .unwrap()
         .tolerances(1e-8, 1e-8)
         .unwrap()
-        .run(
+        .solve(
             InitialState::from_velocity([std::f64::consts::PI - 0.3], [0.0]),
             10.0,
+            output::Records,
         )
         .unwrap();
     let end = run.last().unwrap();
@@ -160,7 +161,11 @@ impl ForcedLagrangian<1> for Mislabelled {
 fn driven_time_flag_is_checked() {
     let f = Integrator::new(&Mislabelled, Scheme::lobatto(3).unwrap(), 0.1)
         .unwrap()
-        .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            1.0,
+            output::Records,
+        )
         .unwrap_err();
     assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
 }
@@ -224,11 +229,19 @@ fn same_trajectory<A: ForcedLagrangian<1>, B: ForcedLagrangian<1>>(
     for s in [2, 3, 4] {
         let ra = Integrator::new(a, Scheme::lobatto(s).unwrap(), h)
             .unwrap()
-            .run(InitialState::from_velocity(start.0, start.1), t_final)
+            .solve(
+                InitialState::from_velocity(start.0, start.1),
+                t_final,
+                output::Records,
+            )
             .unwrap();
         let rb = Integrator::new(b, Scheme::lobatto(s).unwrap(), h)
             .unwrap()
-            .run(InitialState::from_velocity(start.0, start.1), t_final)
+            .solve(
+                InitialState::from_velocity(start.0, start.1),
+                t_final,
+                output::Records,
+            )
             .unwrap();
         assert_eq!(ra.records.len(), rb.records.len());
         for (x, y) in ra.records.iter().zip(&rb.records) {

@@ -31,12 +31,12 @@ fn ensemble_paper_members_match_member_by_member_runs() {
     assert_eq!(members.len(), 25);
     let integrator =
         Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
-    let runs = integrator.run_ensemble(&members, t_final);
-    let ends = integrator.run_ensemble_final(&members, t_final);
+    let runs = integrator.ensemble(&members, t_final, output::Records);
+    let ends = integrator.ensemble(&members, t_final, output::Final);
     assert_eq!(runs.len(), 25);
     assert_eq!(ends.len(), 25);
     for (m, init) in members.iter().enumerate() {
-        let alone = integrator.run(*init, t_final).unwrap();
+        let alone = integrator.solve(*init, t_final, output::Records).unwrap();
         // Bit for bit: every member runs the same sequential code.
         assert_eq!(runs[m].as_ref().unwrap(), &alone, "member {m}");
         let (end, last) = (ends[m].as_ref().unwrap(), alone.last().unwrap());
@@ -58,8 +58,8 @@ fn ensemble_bad_member_gives_its_typed_error_and_the_others_run() {
     members[7] = InitialState::from_velocity([f64::NAN, 0.0], [0.0, 4.0]);
     let integrator =
         Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
-    let runs = integrator.run_ensemble(&members, t_final);
-    let ends = integrator.run_ensemble_final(&members, t_final);
+    let runs = integrator.ensemble(&members, t_final, output::Records);
+    let ends = integrator.ensemble(&members, t_final, output::Final);
     for m in 0..members.len() {
         if m == 7 {
             let failure = runs[m].as_ref().unwrap_err();
@@ -74,7 +74,9 @@ fn ensemble_bad_member_gives_its_typed_error_and_the_others_run() {
                 "{failure}"
             );
         } else {
-            let alone = integrator.run(members[m], t_final).unwrap();
+            let alone = integrator
+                .solve(members[m], t_final, output::Records)
+                .unwrap();
             assert_eq!(runs[m].as_ref().unwrap(), &alone, "member {m}");
             assert_eq!(ends[m].as_ref().unwrap().q, alone.last().unwrap().q);
         }
@@ -95,7 +97,7 @@ fn ensemble_over_parameter_sets_matches_separate_runs() {
     let run = |m: &CoupledVanDerPol| {
         Integrator::new(m, Scheme::lobatto(3).unwrap(), 0.01)
             .unwrap()
-            .run(init, 1.0)
+            .solve(init, 1.0, output::Records)
             .map_err(|f| f.error)
     };
     let together = forced_vi::ensemble::map(&models, run);
@@ -120,7 +122,7 @@ fn ensemble_speed_up_on_two_threads_is_reported() {
             .unwrap();
         for _ in 0..3 {
             let start = Instant::now();
-            let ends = pool.install(|| integrator.run_ensemble_final(&members, t_final));
+            let ends = pool.install(|| integrator.ensemble(&members, t_final, output::Final));
             best[slot] = best[slot].min(start.elapsed().as_secs_f64());
             assert!(ends.iter().all(Result::is_ok));
         }

@@ -14,7 +14,7 @@ use forced_vi_models::models::CoupledVanDerPol;
 fn cvdp_run(h: f64, t_final: f64, init: InitialState<2>) -> Result<Trajectory<2>, RunFailure<2>> {
     let model = CoupledVanDerPol::PAPER;
     match Integrator::new(&model, Scheme::lobatto(3).unwrap(), h) {
-        Ok(i) => i.run(init, t_final),
+        Ok(i) => i.solve(init, t_final, output::Records),
         Err(error) => Err(RunFailure::from(error)),
     }
 }
@@ -99,7 +99,11 @@ fn extreme_singular_mass_from_parameters() {
     };
     let f = Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.1)
         .unwrap()
-        .run(InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]), 1.0)
+        .solve(
+            InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]),
+            1.0,
+            output::Records,
+        )
         .unwrap_err();
     assert!(
         matches!(f.error, Error::SingularMassMatrix { step: 0, .. }),
@@ -141,7 +145,11 @@ fn extreme_mass_becomes_singular_mid_run() {
     let model = VanishingMass { a: 0.25 };
     let f = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01)
         .unwrap()
-        .run(InitialState::from_velocity([0.0], [1.0]), 5.0)
+        .solve(
+            InitialState::from_velocity([0.0], [1.0]),
+            5.0,
+            output::Records,
+        )
         .unwrap_err();
     eprintln!("{}", f.error);
     assert!(
@@ -176,7 +184,11 @@ fn extreme_force_returns_nan_mid_run() {
     let f = Integrator::new(&SqrtDrag, Scheme::lobatto(2).unwrap(), 0.01)
         .unwrap()
         .max_subdivisions(3)
-        .run(InitialState::from_velocity([0.0], [2.0]), 2.0)
+        .solve(
+            InitialState::from_velocity([0.0], [2.0]),
+            2.0,
+            output::Records,
+        )
         .unwrap_err();
     match f.error {
         Error::NonFiniteModel { step, t } => {
@@ -199,7 +211,7 @@ fn extreme_newton_does_not_converge() {
     let f = Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(4).unwrap(), 0.5)
         .unwrap()
         .newton(opts)
-        .run(paper_init(), 2.0)
+        .solve(paper_init(), 2.0, output::Records)
         .unwrap_err();
     match f.error {
         Error::NewtonFailed {
@@ -247,7 +259,11 @@ fn extreme_very_stiff_steps_converge_at_round_off() {
         let run = Integrator::new(&model, Scheme::midpoint(), h)
             .unwrap()
             .max_subdivisions(levels)
-            .run(InitialState::from_velocity([2.0], [0.0]), 3.0 * h)
+            .solve(
+                InitialState::from_velocity([2.0], [0.0]),
+                3.0 * h,
+                output::Records,
+            )
             .unwrap_or_else(|f| panic!("h = {h}: {}", f.error));
         let end = run.last().unwrap();
         // On the slow manifold q drifts down from 2 by a tiny amount over t ≤ 3000 (τ ≤ 3e-3).

@@ -77,7 +77,9 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     let scheme = Scheme::new(id).map_err(|e| format!("scheme {id}: {e}"))?;
     let t_final = h * steps as f64;
     let result = match Integrator::new(model, scheme, h) {
-        Ok(i) => i.max_subdivisions(levels).run(init, t_final),
+        Ok(i) => i
+            .max_subdivisions(levels)
+            .solve(init, t_final, output::Records),
         Err(error) => Err(RunFailure::from(error)),
     };
     match result {

@@ -11,7 +11,7 @@ fn final_state_matches_the_full_run() {
     for s in 2..=5 {
         let integ =
             Integrator::new(&CoupledVanDerPol::PAPER, Scheme::lobatto(s).unwrap(), 0.01).unwrap();
-        let full = integ.run(init, 3.0).unwrap();
+        let full = integ.solve(init, 3.0, output::Records).unwrap();
         let end = integ.final_state(init, 3.0).unwrap();
         let last = full.last().unwrap();
         assert_eq!(end.t, 3.0);
@@ -30,7 +30,7 @@ fn final_state_matches_the_full_run() {
         .tolerances(1e-9, 1e-9)
         .unwrap();
     let init = InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]);
-    let full = integ.run(init, 5.0).unwrap();
+    let full = integ.solve(init, 5.0, output::Records).unwrap();
     let end = integ.final_state(init, 5.0).unwrap();
     let last = full.last().unwrap();
     assert!((end.q - last.q).amax() <= 1e-12 && (end.v - last.v).amax() <= 1e-10);

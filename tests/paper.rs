@@ -22,7 +22,7 @@ fn final_errors<M: ForcedLagrangian<2>>(
     let v0 = [init.v[0], init.v[1]];
     let run = Integrator::new(model, Scheme::new(id).unwrap(), h)
         .unwrap()
-        .run(InitialState::from_velocity(q0, v0), goal.t)
+        .solve(InitialState::from_velocity(q0, v0), goal.t, output::Records)
         .unwrap();
     let end = run.last().unwrap();
     assert!((end.t - goal.t).abs() < 1e-12);
@@ -157,7 +157,11 @@ fn paper_energy_balance_converges_at_scheme_order() {
         for h in grid() {
             let run = Integrator::new(&model, Scheme::lobatto(s).unwrap(), h)
                 .unwrap()
-                .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
+                .solve(
+                    InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+                    1.0,
+                    output::Records,
+                )
                 .unwrap();
             let worst = run
                 .records
@@ -181,9 +185,10 @@ fn paper_damped_oscillator_midpoint_recurrence() {
     let h = 0.07;
     let run = Integrator::new(&model, Scheme::midpoint(), h)
         .unwrap()
-        .run(
+        .solve(
             InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]),
             200.0 * h,
+            output::Records,
         )
         .unwrap();
     let mat = |a: [[f64; 2]; 2]| nalgebra::Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
@@ -231,7 +236,11 @@ fn paper_alpha_rule_forcing_contributions() {
     for alpha in [0.0, 0.25, 0.5, 0.8, 1.0] {
         let run = Integrator::new(&model, Scheme::new(SchemeId::Alpha(alpha)).unwrap(), h)
             .unwrap()
-            .run(InitialState::from_velocity([0.4], [1.1]), h)
+            .solve(
+                InitialState::from_velocity([0.4], [1.1]),
+                h,
+                output::Records,
+            )
             .unwrap();
         let (r0, r1) = (&run.records[0], &run.records[1]);
         let vbar = (r1.q[0] - r0.q[0]) / h;

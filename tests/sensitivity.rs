@@ -4,6 +4,7 @@
 //! adaptive runs against fixed ones.
 //! `cargo test --workspace --release --test sensitivity`.
 
+use forced_vi::output;
 use forced_vi::{
     ForcedLagrangian, InitialState, Integrator, LinearPath, NewtonOptions, Scalar, Scheme,
     Sensitivities,
@@ -59,7 +60,11 @@ fn check_against_differences<M: ForcedLagrangian<N>, const N: usize>(
 ) -> f64 {
     let integ = Integrator::new(model, scheme, h).expect("integrator");
     let s: Sensitivities<N> = integ
-        .sensitivities(InitialState::from_velocity(q0, v0), t_final)
+        .solve(
+            InitialState::from_velocity(q0, v0),
+            t_final,
+            output::Tangents,
+        )
         .expect("sensitivity run");
     let end = integ
         .final_state(InitialState::from_velocity(q0, v0), t_final)
@@ -202,7 +207,11 @@ fn sensitivity_unforced_map_is_symplectic() {
         for (t_final, bound) in [(1.0, 1.0), (5.0, f64::NAN)] {
             let s = Integrator::new(&DoublePendulum, scheme.clone(), 0.01)
                 .expect("integrator")
-                .sensitivities(InitialState::from_velocity(init.0, init.1), t_final)
+                .solve(
+                    InitialState::from_velocity(init.0, init.1),
+                    t_final,
+                    output::Tangents,
+                )
                 .expect("run");
             let m = qp_tangent(&DoublePendulum, &s, init);
             let defect = (m.transpose() * &j * &m - &j).amax();
@@ -224,7 +233,11 @@ fn sensitivity_unforced_map_is_symplectic() {
     let friction = DoublePendulumFriction::DEFAULT;
     let s = Integrator::new(&friction, Scheme::lobatto(3).expect("scheme"), 0.01)
         .expect("integrator")
-        .sensitivities(InitialState::from_velocity(init.0, init.1), 5.0)
+        .solve(
+            InitialState::from_velocity(init.0, init.1),
+            5.0,
+            output::Tangents,
+        )
         .expect("run");
     let det = qp_tangent(&friction, &s, init).determinant();
     assert!(det < 0.9, "det = {det}");
@@ -241,7 +254,7 @@ fn sensitivity_sparse_backend_matches_dense() {
             Integrator::new(&model, scheme.clone(), 0.05)
                 .expect("integrator")
                 .linear_path(path)
-                .sensitivities(init, 3.0)
+                .solve(init, 3.0, output::Tangents)
                 .expect("run")
         };
         let (dense, sparse) = (run(LinearPath::Dense), run(LinearPath::Sparse));
@@ -253,7 +266,7 @@ fn sensitivity_sparse_backend_matches_dense() {
     let integ = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 0.05)
         .expect("integrator")
         .linear_path(LinearPath::Sparse);
-    let s = integ.sensitivities(init, 3.0).expect("run");
+    let s = integ.solve(init, 3.0, output::Tangents).expect("run");
     let (q0, v0) = match init {
         InitialState::Velocity { q, v } => (q, v),
         InitialState::Momentum { .. } => unreachable!(),
@@ -272,11 +285,11 @@ fn sensitivity_adaptive_runs_hold_their_steps() {
     let scheme = Scheme::lobatto(4).expect("scheme");
     let adaptive = Integrator::adaptive(&model, scheme.clone(), 1e-11, 1e-11)
         .expect("integrator")
-        .sensitivities(init, 1.0)
+        .solve(init, 1.0, output::Tangents)
         .expect("adaptive run");
     let fixed = Integrator::new(&model, scheme, 1e-3)
         .expect("integrator")
-        .sensitivities(init, 1.0)
+        .solve(init, 1.0, output::Tangents)
         .expect("fixed run");
     let rel = relative(&adaptive.wrt_initial, &fixed.wrt_initial);
     eprintln!(
@@ -297,7 +310,7 @@ fn sensitivity_subdivided_steps_are_carried() {
         .newton(NewtonOptions::default().max_iterations(3))
         .max_subdivisions(6);
     let s = integ
-        .sensitivities(InitialState::from_velocity(q0, v0), 8.0)
+        .solve(InitialState::from_velocity(q0, v0), 8.0, output::Tangents)
         .expect("run");
     let fd = central_differences(&integ, (q0, v0), 8.0, 1e-5);
     let rel = relative(&s.wrt_initial, &fd);
@@ -356,7 +369,7 @@ fn check_parameters<M: ForcedLagrangian<N>, const N: usize>(
     let model = make(&theta);
     let s = Integrator::new(&model, scheme.clone(), h)
         .expect("integrator")
-        .sensitivities(init, t_final)
+        .solve(init, t_final, output::Tangents)
         .expect("run");
     assert_eq!(s.wrt_parameters.shape(), (2 * N, names.len()));
     let fd = parameter_differences(&make, &theta, (scheme, h), init, t_final);
@@ -464,7 +477,11 @@ fn sensitivity_hand_written_models_declare_no_parameters() {
         0.02,
     )
     .expect("integrator")
-    .sensitivities(InitialState::from_velocity([1.0], [0.0]), 1.0)
+    .solve(
+        InitialState::from_velocity([1.0], [0.0]),
+        1.0,
+        output::Tangents,
+    )
     .expect("run");
     assert_eq!(s.wrt_parameters.shape(), (2, 0));
     assert!(DrivenDuffing::CHAOTIC.parameter_names().is_empty());
@@ -478,9 +495,11 @@ fn adjoint_against_forward<M: ForcedLagrangian<N>, const N: usize>(
     t_final: f64,
 ) -> f64 {
     let w = SVector::<f64, N>::from_fn(|a, _| 0.3 - 0.1 * a as f64);
-    let fwd = integ.sensitivities(init, t_final).expect("forward");
+    let fwd = integ
+        .solve(init, t_final, output::Tangents)
+        .expect("forward");
     let adj = integ
-        .adjoint_gradient(init, t_final, |end| (end.q, w))
+        .solve(init, t_final, output::adjoint(|end| (end.q, w)))
         .expect("adjoint");
     assert_eq!(adj.q, fwd.q);
     let mut g = nalgebra::DVector::zeros(2 * N);

@@ -7,6 +7,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::{Mutex, MutexGuard};
 
+use forced_vi::output;
 use forced_vi::sparse::{NodeBlocks, NodePattern, NodeSink, SparseNode};
 use forced_vi::{
     Error, ForcedLagrangian, InitialState, Integrator, LinearPath, Scalar, Scheme, Trajectory,
@@ -82,7 +83,7 @@ fn run<M: ForcedLagrangian<N>, const N: usize>(
         .unwrap()
         .linear_path(path);
     assert_eq!(integ.path_for(&init).unwrap(), path);
-    integ.run(init, t_final).unwrap()
+    integ.solve(init, t_final, output::Records).unwrap()
 }
 
 /// Largest difference of `q` and `p` over the run, relative to their largest size.
@@ -218,7 +219,7 @@ fn n4096_chain_steps_on_a_2mib_thread() {
             let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.05).unwrap();
             let init = FpuChain::<4096>::initial();
             assert_eq!(integ.path_for(&init).unwrap(), LinearPath::Sparse);
-            let run = integ.run(init, 0.15).unwrap();
+            let run = integ.solve(init, 0.15, output::Records).unwrap();
             let end = run.last().unwrap();
             assert_eq!(end.step, 3);
             assert!(end.q.iter().all(|x| x.is_finite()));
@@ -228,7 +229,11 @@ fn n4096_chain_steps_on_a_2mib_thread() {
                 end.energy_balance
             );
             // The dense path is refused, not attempted: its kernels would need gigabytes.
-            let dense = integ.clone().linear_path(LinearPath::Dense).run(init, 0.15);
+            let dense =
+                integ
+                    .clone()
+                    .linear_path(LinearPath::Dense)
+                    .solve(init, 0.15, output::Records);
             assert!(matches!(failed(dense).error, Error::ModelTooLarge { .. }));
         })
         .unwrap();
@@ -304,7 +309,7 @@ fn typed_errors_of_the_sparse_path() {
     let integ = Integrator::new(&bad, lob.clone(), 0.001)
         .unwrap()
         .linear_path(LinearPath::Sparse);
-    let failure = failed(integ.run(init, 1.0));
+    let failure = failed(integ.solve(init, 1.0, output::Records));
     assert!(
         matches!(failure.error, Error::InvalidModel { .. }),
         "{}",
@@ -318,7 +323,11 @@ fn typed_errors_of_the_sparse_path() {
         past_n: true,
     };
     let integ = Integrator::new(&bad, lob.clone(), 0.01).unwrap();
-    let failure = failed(integ.linear_path(LinearPath::Sparse).run(init, 1.0));
+    let failure = failed(
+        integ
+            .linear_path(LinearPath::Sparse)
+            .solve(init, 1.0, output::Records),
+    );
     assert!(
         matches!(failure.error, Error::InvalidModel { .. }),
         "{}",
@@ -353,7 +362,7 @@ fn typed_errors_of_the_sparse_path() {
         .unwrap()
         .linear_path(LinearPath::Sparse);
     let init = InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]);
-    let err = failed(integ.run(init, 1.0)).error;
+    let err = failed(integ.solve(init, 1.0, output::Records)).error;
     assert!(matches!(err, Error::NoSparseKernels { .. }), "{err}");
     assert_eq!(err.kind(), "no_sparse_kernels");
     // Small models keep the dense path under Auto.
@@ -421,7 +430,9 @@ fn a_sparse_step_allocates_nothing() {
     assert_eq!(allocations_in_steps(&mut stepper), 0, "lattice");
     // The allocator counts: a run allocates (its buffers, once).
     let before = allocations();
-    integ.run(Lattice2d::<16, 256>::initial(), 0.1).unwrap();
+    integ
+        .solve(Lattice2d::<16, 256>::initial(), 0.1, output::Records)
+        .unwrap();
     assert!(allocations() > before);
 }
 

@@ -36,28 +36,28 @@ fn every_method<const N: usize>() -> Vec<(&'static str, f64)> {
     let integ = dense(&model);
     assert_eq!(integ.path_for(&initial()).unwrap(), LinearPath::Dense);
     let mut out = Vec::new();
-    let run = integ.run(initial(), T).unwrap();
+    let run = integ.solve(initial(), T, output::Records).unwrap();
     out.push(("run", run.last().unwrap().q[N / 2]));
     let fin = integ.final_state(initial(), T).unwrap();
     out.push(("final_state", fin.q[N / 2]));
     let mut last = 0.0;
     integ
-        .for_each_step(initial(), T, |r| last = r.q[N / 2])
+        .solve(initial(), T, output::each_step(|r| last = r.q[N / 2]))
         .unwrap();
     out.push(("for_each_step", last));
     let mut stepper = integ.stepper(initial(), T).unwrap();
     assert_eq!(stepper.path(), LinearPath::Dense);
     let end = stepper.by_ref().last().unwrap().unwrap();
     out.push(("stepper", end.q[N / 2]));
-    let samples = integ.sample(initial(), &[T]).unwrap();
+    let samples = integ.solve(initial(), T, output::Samples(&[T])).unwrap();
     out.push(("sample", samples[0].q[N / 2]));
     let adaptive = integ.clone().tolerances(1e-6, 1e-6).unwrap();
     let ada = adaptive.final_state(initial(), T).unwrap();
-    let runs = integ.run_ensemble(&[initial(), initial()], T);
+    let runs = integ.ensemble(&[initial(), initial()], T, output::Records);
     for r in runs {
         out.push(("run_ensemble", r.unwrap().last().unwrap().q[N / 2]));
     }
-    for r in integ.run_ensemble_final(&[initial()], T) {
+    for r in integ.ensemble(&[initial()], T, output::Final) {
         out.push(("run_ensemble_final", r.unwrap().q[N / 2]));
     }
     let reference = out[0].1;
@@ -84,7 +84,10 @@ fn too_large_for_dense() {
     assert!(matches!(err, Error::ModelTooLarge { dof: N, .. }), "{err}");
     let err = integ.stepper(initial(), T).err().unwrap();
     assert!(matches!(err, Error::ModelTooLarge { .. }), "{err}");
-    let err = integ.run(initial(), T).unwrap_err().error;
+    let err = integ
+        .solve(initial(), T, output::Records)
+        .unwrap_err()
+        .error;
     assert_eq!(err.kind(), "model_too_large");
     // Under Auto the model's sparse kernels take it.
     let auto = integ.linear_path(LinearPath::Auto);

@@ -40,7 +40,11 @@ fn trust_many_stages_are_refused_or_accurate() {
     for s in [6, 10, 16, 24, forced_vi::scheme::MAX_STAGES] {
         let run = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.1)
             .unwrap()
-            .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+            .solve(
+                InitialState::from_velocity([1.0], [0.0]),
+                10.0,
+                output::Records,
+            )
             .unwrap_or_else(|f| panic!("lobatto{s}: {}", f.error));
         let end = run.last().unwrap();
         let err = (end.q[0] - damped_exact(0.1, 10.0)).abs();
@@ -56,16 +60,25 @@ fn trust_absurd_step_counts_are_refused_before_stepping() {
     let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 1.0).unwrap();
     let init = InitialState::from_velocity([1.0], [0.0]);
     for t_final in [1e300, 1e12, f64::MAX] {
-        let f = integ.run(init, t_final).unwrap_err();
+        let f = integ.solve(init, t_final, output::Records).unwrap_err();
         assert!(matches!(f.error, Error::TooManySteps { .. }), "{}", f.error);
         assert!(f.trajectory.records.is_empty());
-        let f = integ.for_each_step(init, t_final, |_| {}).unwrap_err();
+        let f = integ
+            .solve(init, t_final, output::each_step(|_| {}))
+            .unwrap_err();
         assert!(matches!(f.error, Error::TooManySteps { .. }));
     }
     // The cap is the user's to set.
-    let f = integ.clone().max_steps(10).run(init, 11.0).unwrap_err();
+    let f = integ
+        .clone()
+        .max_steps(10)
+        .solve(init, 11.0, output::Records)
+        .unwrap_err();
     assert!(matches!(f.error, Error::TooManySteps { max: 10, .. }));
-    assert!(integ.max_steps(10).run(init, 10.0).is_ok());
+    assert!(integ
+        .max_steps(10)
+        .solve(init, 10.0, output::Records)
+        .is_ok());
 }
 
 #[test]
@@ -80,7 +93,11 @@ fn trust_records_that_cannot_fit_are_refused_before_stepping() {
     let model = Damped { c: 0.1 };
     let f = Integrator::new(&model, Scheme::midpoint(), 1e-9)
         .unwrap()
-        .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            1.0,
+            output::Records,
+        )
         .unwrap_err();
     assert!(
         matches!(
@@ -100,7 +117,11 @@ fn trust_a_tiny_final_time_takes_one_short_step() {
     for (h, t_final) in [(1.0, 1e-12), (0.1, 1e-300), (1.0, 5e-11)] {
         let run = Integrator::new(&model, Scheme::lobatto(3).unwrap(), h)
             .unwrap()
-            .run(InitialState::from_velocity([1.0], [2.0]), t_final)
+            .solve(
+                InitialState::from_velocity([1.0], [2.0]),
+                t_final,
+                output::Records,
+            )
             .unwrap();
         assert_eq!(run.records.len(), 2, "t_final = {t_final}");
         let end = run.last().unwrap();
@@ -153,9 +174,10 @@ fn chain_steps<const N: usize>(steps: usize) -> Result<(), String> {
     q0[0] = 0.1;
     let run = Integrator::new(&Chain::<N>, Scheme::lobatto(2).unwrap(), 0.05)
         .map_err(|e| e.to_string())?
-        .run(
+        .solve(
             InitialState::from_velocity(q0, [0.0; N]),
             steps as f64 * 0.05,
+            output::Records,
         )
         .map_err(|f| f.error.to_string())?;
     let end = run.last().ok_or("no records")?;
@@ -198,7 +220,11 @@ fn trust_large_macro_models_run_on_a_small_stack() {
         q0[0] = 0.1;
         Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.05)
             .map_err(|e| e.to_string())?
-            .run(InitialState::from_velocity(q0, [0.0; N]), 0.1)
+            .solve(
+                InitialState::from_velocity(q0, [0.0; N]),
+                0.1,
+                output::Records,
+            )
             .map(|_| ())
             .map_err(|f| f.error.to_string())
     }
@@ -231,7 +257,11 @@ impl ForcedLagrangian<1> for Relativistic {
 fn trust_velocity_solve_converges_for_nonquadratic_kinetic_energy() {
     let run = Integrator::new(&Stiffening, Scheme::lobatto(3).unwrap(), 0.001)
         .unwrap()
-        .run(InitialState::from_momentum([0.5], [6.0]), 0.2)
+        .solve(
+            InitialState::from_momentum([0.5], [6.0]),
+            0.2,
+            output::Records,
+        )
         .unwrap_or_else(|f| panic!("{}", f.error));
     let first = &run.records[0];
     assert!((first.v[0] - 1.0).abs() < 1e-13, "v0 = {}", first.v[0]);
@@ -250,7 +280,11 @@ fn trust_velocity_solve_stays_in_the_model_domain() {
     for p0 in [0.5, 1.0, 2.0, 10.0] {
         let run = Integrator::new(&Relativistic, Scheme::lobatto(3).unwrap(), 0.001)
             .unwrap()
-            .run(InitialState::from_momentum([0.5], [p0]), 0.1)
+            .solve(
+                InitialState::from_momentum([0.5], [p0]),
+                0.1,
+                output::Records,
+            )
             .unwrap_or_else(|f| panic!("p0 = {p0}: {}", f.error));
         let v0 = p0 / (1.0 + p0 * p0).sqrt();
         assert!((run.records[0].v[0] - v0).abs() < 1e-13, "p0 = {p0}");
@@ -292,8 +326,11 @@ fn trust_ok_records_are_finite_or_the_run_reports_overflow() {
     for v0 in [1e150, 1e154, 1e200, 1e300] {
         match Integrator::new(&Dragged, Scheme::lobatto(3).unwrap(), 0.1)
             .unwrap()
-            .run(InitialState::from_velocity([0.0], [v0]), 0.5)
-        {
+            .solve(
+                InitialState::from_velocity([0.0], [v0]),
+                0.5,
+                output::Records,
+            ) {
             Ok(run) => assert!(run.records.iter().all(all_fields_finite), "v0 = {v0}"),
             Err(f) => {
                 assert!(
@@ -322,7 +359,11 @@ fn trust_subdivision_never_crosses_a_singular_mass() {
         let f = Integrator::new(&SingularAtOne, Scheme::lobatto(3).unwrap(), h)
             .unwrap()
             .max_subdivisions(levels)
-            .run(InitialState::from_velocity([0.0], [2.0]), 3.0)
+            .solve(
+                InitialState::from_velocity([0.0], [2.0]),
+                3.0,
+                output::Records,
+            )
             .expect_err("the exact solution reaches the singular mass at |q| = 1");
         assert!(
             matches!(
@@ -351,7 +392,11 @@ fn trust_an_unstable_scheme_reports_overflow_not_a_model_fault() {
     let model = Damped { c: 0.0 };
     let f = Integrator::new(&model, Scheme::new(SchemeId::Alpha(0.0)).unwrap(), 3.0)
         .unwrap()
-        .run(InitialState::from_velocity([1.0], [0.0]), 3e5)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            3e5,
+            output::Records,
+        )
         .unwrap_err();
     assert!(
         matches!(f.error, Error::Overflow { .. } | Error::NewtonFailed { .. }),
@@ -376,7 +421,11 @@ fn trust_badly_scaled_diagonal_mass_is_not_singular() {
     for a in [1e-14, 1e-30, 1e30] {
         let run = Integrator::new(&Anisotropic { a }, Scheme::lobatto(3).unwrap(), 0.01)
             .unwrap()
-            .run(InitialState::from_momentum([0.0, 1.0], [0.0, 0.0]), 0.1)
+            .solve(
+                InitialState::from_momentum([0.0, 1.0], [0.0, 0.0]),
+                0.1,
+                output::Records,
+            )
             .unwrap_or_else(|f| panic!("a = {a}: {}", f.error));
         assert!((run.last().unwrap().q[1] - 0.1f64.cos()).abs() < 1e-10);
     }
@@ -396,7 +445,7 @@ fn trust_bad_newton_options_are_typed_errors() {
         let f = Integrator::new(&model, Scheme::midpoint(), 0.1)
             .unwrap()
             .newton(opts)
-            .run(init, 1.0)
+            .solve(init, 1.0, output::Records)
             .unwrap_err();
         assert!(
             matches!(f.error, Error::InvalidNewtonOptions { .. }),
@@ -423,9 +472,11 @@ fn trust_streaming_failure_keeps_its_stats() {
     let mut seen = 0;
     let f = Integrator::new(&SqrtDrag, Scheme::lobatto(2).unwrap(), 0.01)
         .unwrap()
-        .for_each_step(InitialState::from_velocity([0.0], [2.0]), 2.0, |_| {
-            seen += 1
-        })
+        .solve(
+            InitialState::from_velocity([0.0], [2.0]),
+            2.0,
+            output::each_step(|_| seen += 1),
+        )
         .unwrap_err();
     assert!(
         matches!(f.error, Error::NonFiniteModel { .. }),

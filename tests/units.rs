@@ -479,11 +479,11 @@ mod handwritten {
             let scheme = Scheme::new(id.parse().unwrap()).unwrap();
             let a = Integrator::new(&CoupledVanDerPol::PAPER, scheme.clone(), 0.01)
                 .unwrap()
-                .run(init, 1.0)
+                .solve(init, 1.0, output::Records)
                 .unwrap();
             let b = Integrator::new(&HandCoupledVanDerPol::PAPER, scheme, 0.01)
                 .unwrap()
-                .run(init, 1.0)
+                .solve(init, 1.0, output::Records)
                 .unwrap();
             let (ea, eb) = (a.last().unwrap(), b.last().unwrap());
             assert!((ea.q - eb.q).amax() < 1e-12, "{id}");

@@ -27,13 +27,14 @@
 //!     .map(|i| InitialState::from_velocity([i as f64 * 0.1], [0.0]))
 //!     .collect();
 //! let integrator = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?;
-//! let ends = integrator.run_ensemble_final(&members, 1.0);
+//! let ends = integrator.ensemble(&members, 1.0, output::Final);
 //! assert_eq!(ends.len(), 8);
 //! assert!(ends.iter().all(|end| end.as_ref().is_ok_and(|e| e.stats.steps == 100)));
 //! # Ok::<(), forced_vi::Error>(())
 //! ```
 
 use crate::initial::InitialState;
+use crate::integrator::output::{self, Output};
 use crate::integrator::Integrator;
 use crate::model::ForcedLagrangian;
 use crate::trajectory::{FinalState, RunFailure, Trajectory};
@@ -54,7 +55,7 @@ use crate::trajectory::{FinalState, RunFailure, Trajectory};
 /// let models: Vec<_> = [1.0, 4.0, 9.0].map(|k| Oscillator { k }).into();
 /// let ends = forced_vi::ensemble::map(&models, |m| {
 ///     Integrator::new(m, Scheme::lobatto(3)?, 0.01)?
-///         .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+///         .solve(InitialState::from_velocity([1.0], [0.0]), 1.0, output::Final)
 ///         .map_err(|f| f.error)
 /// });
 /// assert!(ends.iter().all(Result::is_ok));
@@ -79,27 +80,44 @@ impl<M, const N: usize> Integrator<'_, M, N>
 where
     M: ForcedLagrangian<N> + Sync,
 {
-    /// Runs every initial state to `t_final` (see [`Integrator::run`]) and keeps each
-    /// member's trajectory or its [`RunFailure`], in the members' order.
+    /// Runs every initial state to `t_final`, each with [`Integrator::solve`] and the same
+    /// `output` (every record, the final state, samples, derivatives, ...), and keeps each
+    /// member's value or its [`RunFailure`], in the members' order.
     ///
     /// The model must be `Sync` (shared by the worker threads), with or without the
     /// feature `rayon`, so that turning the feature on cannot break a build.
+    pub fn ensemble<O>(
+        &self,
+        members: &[InitialState<N>],
+        t_final: f64,
+        output: O,
+    ) -> Vec<Result<O::Value, RunFailure<N>>>
+    where
+        O: Output<N> + Clone + Sync,
+        O::Value: Send,
+    {
+        map(members, |init| self.solve(*init, t_final, output.clone()))
+    }
+
+    /// `ensemble(members, t_final, output::Records)`.
+    #[doc(hidden)]
+    #[deprecated(note = "use `ensemble(members, t_final, output::Records)`")]
     pub fn run_ensemble(
         &self,
         members: &[InitialState<N>],
         t_final: f64,
     ) -> Vec<Result<Trajectory<N>, RunFailure<N>>> {
-        map(members, |init| self.run(*init, t_final))
+        self.ensemble(members, t_final, output::Records)
     }
 
-    /// Like [`run_ensemble`](Self::run_ensemble) but keeps only each member's final state
-    /// and totals, the cheapest run ([`Integrator::final_state`]): memory does not grow with
-    /// the number of steps, and the per-step diagnostics are left out.
+    /// `ensemble(members, t_final, output::Final)`.
+    #[doc(hidden)]
+    #[deprecated(note = "use `ensemble(members, t_final, output::Final)`")]
     pub fn run_ensemble_final(
         &self,
         members: &[InitialState<N>],
         t_final: f64,
     ) -> Vec<Result<FinalState<N>, RunFailure<N>>> {
-        map(members, |init| self.final_state(*init, t_final))
+        self.ensemble(members, t_final, output::Final)
     }
 }

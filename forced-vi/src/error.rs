@@ -121,8 +121,8 @@ pub enum Error {
         max: usize,
     },
     /// The records of a collecting run do not fit in memory; stream them instead
-    /// ([`crate::Integrator::for_each_step`]).
-    #[error("cannot hold {records} records in memory; stream them with for_each_step")]
+    /// ([`crate::output::each_step`]).
+    #[error("cannot hold {records} records in memory; stream them with output::each_step")]
     TooManyRecords {
         /// Records the run needs.
         records: usize,
@@ -194,8 +194,8 @@ pub enum Error {
         /// What is not supported.
         message: &'static str,
     },
-    /// Output times that decrease.
-    #[error("output times must be non-decreasing")]
+    /// Output times that decrease, or that lie past the end of the run.
+    #[error("output times must be non-decreasing and no later than the final time")]
     UnorderedTimes,
     /// The initial data contain NaN or infinity.
     #[error("initial {what}[{index}] is not finite")]

@@ -69,7 +69,7 @@
 //! assert_eq!(model.force::<f64>(&[1.0], &[3.0]), [-0.1 * 3.0]);
 //!
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+//!     .solve(InitialState::from_velocity([1.0], [0.0]), 10.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! let end = run.last().expect("a run keeps its initial record");
 //! // x(t) = e^{-ct/2} (cos ωt + c/(2ω) sin ωt), ω² = k − c²/4.
@@ -120,7 +120,7 @@
 //!
 //! // `s` is a free, undamped oscillator: s(t) = sin t.
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(InitialState::from_velocity([0.0; 7], v), 2.0)
+//!     .solve(InitialState::from_velocity([0.0; 7], v), 2.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! let end = run.last().expect("a run keeps its initial record");
 //! assert!((end.q[4] - 2f64.sin()).abs() < 1e-9);
@@ -159,7 +159,7 @@
 //! assert_eq!(chain.coordinate_names()[31], "q"); // names are `&'static str`: no index for `N`
 //! let q0: [f64; 32] = std::array::from_fn(|i| (std::f64::consts::PI * (i + 1) as f64 / 33.0).sin());
 //! let run = Integrator::new(&chain, Scheme::lobatto(3)?, 0.05)?
-//!     .run(InitialState::from_velocity(q0, [0.0; 32]), 5.0)
+//!     .solve(InitialState::from_velocity(q0, [0.0; 32]), 5.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! let (start, end) = (&run.records[0], run.last().expect("a run keeps its initial record"));
 //! assert!(end.energy < start.energy); // damping takes energy out...
@@ -255,7 +255,7 @@
 //! assert!(!<Pendulum as ForcedLagrangian<1>>::STRUCTURE.has_force);
 //! assert_eq!(model.force::<f64>(&[0.3], &[0.1]), [0.0]);
 //! let run = Integrator::new(&model, Scheme::lobatto(4)?, 0.05)?
-//!     .run(InitialState::from_velocity([2.5], [0.0]), 20.0)
+//!     .solve(InitialState::from_velocity([2.5], [0.0]), 20.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! // No force: E − E0 is the whole energy balance. Order 6 at h = 0.05: below 1e-7 over
 //! // the 400 steps, with no drift (the second half is no worse than the first).
@@ -290,7 +290,7 @@
 //! assert!((model.force_at::<f64>(t, &[0.0], &[0.0])[0] + 0.5).abs() < 1e-15);
 //!
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+//!     .solve(InitialState::from_velocity([1.0], [0.0]), 10.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! assert!(run.records.iter().all(|r| r.energy_balance.abs() < 1e-6));
 //!
@@ -343,7 +343,7 @@
 //! // Off the sphere, and a velocity across it: `projected` makes both consistent.
 //! let init = InitialState::projected(&model, [0.6, 0.0, -0.9], [0.0, 1.0, 0.2])?;
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(init, 5.0)
+//!     .solve(init, 5.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! // Rotations about the vertical are a symmetry: L_z = m (x ẏ − y ẋ) is kept.
 //! let lz = |r: &forced_vi::StepRecord<3>| r.q[0] * r.p[1] - r.q[1] * r.p[0];
@@ -371,9 +371,9 @@
 //!
 //! # Parameters and sensitivities
 //!
-//! [`Integrator::sensitivities`] returns, with the final state, `∂(q_T, v_T)/∂(q_0, v_0)`
+//! [`output::Tangents`](crate::output::Tangents) returns, with the final state, `∂(q_T, v_T)/∂(q_0, v_0)`
 //! and `∂(q_T, v_T)/∂θ` for the struct's fields `θ`, in field order; for a scalar loss of
-//! the final state, [`Integrator::adjoint_gradient`] gives its gradient by the discrete
+//! the final state, [`output::adjoint`](crate::output::adjoint) gives its gradient by the discrete
 //! adjoint at the cost of about one more run (DESIGN §12). Both are exact derivatives of
 //! the discrete flow (the factored step Jacobian, no finite differences). The attribute
 //! generates [`ForcedLagrangian::lagrangian_with`] and [`ForcedLagrangian::force_with`],
@@ -394,14 +394,14 @@
 //! assert_eq!(model.parameter_names(), ["k", "c"]);
 //! let integ = Integrator::new(&model, Scheme::lobatto(4)?, 0.01)?;
 //! let init = InitialState::from_velocity([1.0], [0.0]);
-//! let s = integ.sensitivities(init, 1.0)?;
+//! let s = integ.solve(init, 1.0, output::Tangents)?;
 //! // x(T) = cos(√k T): ∂x_T/∂x_0 = cos 1, ∂x_T/∂k = −(T/2) sin 1 at k = 1.
 //! assert!((s.wrt_initial[(0, 0)] - 1f64.cos()).abs() < 1e-9);
 //! assert!((s.wrt_parameters[(0, 0)] + 0.5 * 1f64.sin()).abs() < 1e-9);
 //! // The adjoint gradient of ℓ = x_T agrees.
-//! let g = integ.adjoint_gradient(init, 1.0, |end| {
+//! let g = integ.solve(init, 1.0, output::adjoint( |end| {
 //!     (nalgebra::SVector::from([1.0]), nalgebra::SVector::zeros())
-//! })?;
+//! }))?;
 //! assert!((g.wrt_parameters[0] - s.wrt_parameters[(0, 0)]).abs() < 1e-12);
 //! # Ok::<(), forced_vi::Error>(())
 //! ```
@@ -542,7 +542,7 @@
 //!
 //! let model = CoupledVanDerPol { eps: 0.5, rho: 0.02, lambda: 0.8 };
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 5.0)
+//!     .solve(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 5.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! for r in &run.records {
 //!     let numbers = r.q.iter().chain(&r.p).chain(&r.v).chain([&r.energy, &r.energy_balance]);
@@ -606,7 +606,7 @@
 //! struct Degenerate {}
 //!
 //! let failure = Integrator::new(&Degenerate {}, Scheme::lobatto(3)?, 0.1)?
-//!     .run(InitialState::from_velocity([0.1, 0.2], [0.0, 0.0]), 1.0)
+//!     .solve(InitialState::from_velocity([0.1, 0.2], [0.0, 0.0]), 1.0, output::Records)
 //!     .expect_err("the mass matrix [[1, 1], [1, 1]] is singular");
 //! let message = failure.error.to_string();
 //! assert!(
@@ -628,7 +628,7 @@
 //!
 //! let integrator = Integrator::new(&Free {}, Scheme::lobatto(3)?, 0.1)?;
 //! let failure = integrator
-//!     .run(InitialState::from_velocity([0.0, f64::NAN], [1.0, 0.0]), 1.0)
+//!     .solve(InitialState::from_velocity([0.0, f64::NAN], [1.0, 0.0]), 1.0, output::Records)
 //!     .expect_err("q[1] is NaN");
 //! assert_eq!(failure.error.to_string(), "initial q[1] is not finite");
 //!
@@ -638,7 +638,7 @@
 //!
 //! let integrator = Integrator::new(&Bounded {}, Scheme::lobatto(3)?, 0.1)?;
 //! let failure = integrator
-//!     .run(InitialState::from_momentum([0.0], [2.0]), 1.0)
+//!     .solve(InitialState::from_momentum([0.0], [2.0]), 1.0, output::Records)
 //!     .expect_err("no velocity has p = 2");
 //! let message = failure.error.to_string();
 //! assert!(
@@ -743,7 +743,7 @@
 //! struct Oscillator {}
 //!
 //! let run = Integrator::new(&Oscillator {}, Scheme::lobatto(3)?, 0.1)?
-//!     .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+//!     .solve(InitialState::from_velocity([1.0], [0.0]), 1.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! let json = serde_json::to_string(&run).expect("a trajectory serialises");
 //! let back: Trajectory<1> = serde_json::from_str(&json).expect("and reads back");

@@ -25,7 +25,7 @@
 //!
 //! let model = CoupledVanDerPol { eps: 0.5, rho: 0.02, lambda: 0.8 };
 //! let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
-//!     .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
+//!     .solve(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0, output::Records)
 //!     .map_err(|failure| failure.error)?;
 //! let end = run.last().expect("a run has its initial record");
 //! assert_eq!(end.step, 100);
@@ -98,7 +98,7 @@ pub mod trajectory;
 pub use control::Tolerance;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
-pub use integrator::{Integrator, LinearPath, StepOptions, MAX_KERNEL_STACK};
+pub use integrator::{output, Integrator, LinearPath, StepOptions, MAX_KERNEL_STACK};
 pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{lift, Scalar};
@@ -116,8 +116,8 @@ pub use forced_vi_macros::forced_lagrangian;
 /// The names most programs need.
 pub mod prelude {
     pub use crate::{
-        forced_lagrangian, ForcedLagrangian, InitialState, Integrator, Scalar, Scheme, SchemeId,
-        StepRecord, Tolerance, Trajectory,
+        forced_lagrangian, output, FinalState, ForcedLagrangian, InitialState, Integrator, Scalar,
+        Scheme, SchemeId, StepRecord, Tolerance, Trajectory,
     };
 }
 

@@ -125,7 +125,7 @@ pub struct FinalState<const N: usize> {
     pub stats: RunStats,
 }
 
-/// The end of a sensitivity run ([`crate::Integrator::sensitivities`]): the final state and
+/// The end of a sensitivity run ([`crate::output::Tangents`]): the final state and
 /// the derivatives of the discrete flow (DESIGN §12).
 ///
 /// The derivatives are those of the scheme's map itself, carried through every accepted
@@ -155,7 +155,7 @@ pub struct Sensitivities<const N: usize> {
 }
 
 /// The gradient of a loss of the final state by the discrete adjoint
-/// ([`crate::Integrator::adjoint_gradient`]).
+/// ([`crate::output::adjoint`]).
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct AdjointGradient<const N: usize> {
@@ -240,8 +240,8 @@ pub(crate) fn hermite<const N: usize>(
 /// A run that stopped early, from any run method: the error and everything computed
 /// before it.
 ///
-/// [`Integrator::run`](crate::Integrator::run) keeps its records in
-/// [`RunFailure::trajectory`]; [`Integrator::sample`](crate::Integrator::sample) its samples
+/// [`output::Records`](crate::output::Records) keeps its records in
+/// [`RunFailure::trajectory`]; [`output::Samples`](crate::Integrator::sample) its samples
 /// in [`RunFailure::samples`]; every method the totals (`trajectory.stats`) and the last
 /// record it computed ([`RunFailure::last`]). It converts into the [`Error`], so `?` works
 /// in a function that returns `Result<_, forced_vi::Error>`.
@@ -270,7 +270,7 @@ pub struct RunFailure<const N: usize> {
     /// What stopped the run.
     #[source]
     pub error: Error,
-    /// The records up to the failure (kept by [`Integrator::run`](crate::Integrator::run);
+    /// The records up to the failure (kept by [`output::Records`](crate::output::Records);
     /// empty for the other methods), with the totals.
     pub trajectory: Trajectory<N>,
     /// The totals up to the failure (the same as `trajectory.stats`).
@@ -278,7 +278,7 @@ pub struct RunFailure<const N: usize> {
     /// The last record computed before the failure, if any (boxed: a record holds three
     /// `N`-vectors).
     pub last: Option<Box<StepRecord<N>>>,
-    /// The samples before the failure ([`Integrator::sample`](crate::Integrator::sample)).
+    /// The samples before the failure ([`output::Samples`](crate::Integrator::sample)).
     pub samples: Vec<DenseState<N>>,
 }
 

@@ -35,7 +35,9 @@ where
 fn a_trajectory_round_trips_through_json() -> Result<(), Error> {
     let init = InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]);
     let integrator = Integrator::new(&MODEL, Scheme::lobatto(3)?, 0.01)?;
-    let run = integrator.run(init, 1.0).map_err(|f| f.error)?;
+    let run = integrator
+        .solve(init, 1.0, output::Records)
+        .map_err(|f| f.error)?;
     assert_eq!(run.records.len(), 101);
     // Every f64 is written with enough digits to read back the same bits.
     let back = round_trip(&run);
@@ -87,7 +89,11 @@ fn errors_and_failures_serialise() {
         .expect("valid options")
         .max_steps(3);
     let failure: RunFailure<2> = integrator
-        .run(InitialState::from_velocity([0.0; 2], [0.0; 2]), 1.0)
+        .solve(
+            InitialState::from_velocity([0.0; 2], [0.0; 2]),
+            1.0,
+            output::Records,
+        )
         .expect_err("more steps than the cap");
     let value = serde_json::to_value(&failure).expect("serialises");
     assert!(value["error"].get("TooManySteps").is_some(), "{value}");

@@ -1,5 +1,5 @@
 //! The Poincaré section of the chaotic driven Duffing oscillator (issue 13): the state
-//! `(x, ẋ)` once per driving period, from `Integrator::sample` (the steps are not kept).
+//! `(x, ẋ)` once per driving period, from `output::Samples` (the steps are not kept).
 //!
 //! ```text
 //! poincare_duffing.svg    the section (10⁴ periods; 10³ under --quick)
@@ -37,7 +37,11 @@ pub fn run(opts: &Options) -> Result<usize, ReportError> {
     let scheme = Scheme::lobatto(3).map_err(|e| vi(e.into()))?;
     let samples = Integrator::new(&model, scheme, period / STEPS_PER_PERIOD)
         .map_err(vi)?
-        .sample(InitialState::from_velocity([1.0], [0.0]), &times)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            periods as f64 * period,
+            output::Samples(&times),
+        )
         .map_err(|f| vi(f.error))?;
     let seconds = started.elapsed().as_secs_f64();
     let path = opts.out.join("poincare_duffing.svg");
@@ -48,7 +52,7 @@ pub fn run(opts: &Options) -> Result<usize, ReportError> {
          `driven_duffing`, a force `F(t, x, ẋ)`), sampled once per driving period over {periods} \
          periods from `(x, ẋ) = (1, 0)`, leaving out the first 100: {} points. `lobatto3` with \
          {STEPS_PER_PERIOD} steps per period, {} steps in {seconds:.1} s, through \
-         `Integrator::sample`, which keeps only the samples.\n\n\
+         `output::Samples`, which keeps only the samples.\n\n\
          ![Poincaré section](poincare_duffing.svg)\n",
         samples.len(),
         periods as f64 * STEPS_PER_PERIOD,

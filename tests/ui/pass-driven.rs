@@ -50,7 +50,11 @@ fn main() -> Result<(), forced_vi::Error> {
     };
     const { assert!(<DrivenDuffing as ForcedLagrangian<1>>::STRUCTURE.uses_time) };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.1)?
-        .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([1.0], [0.0]),
+            1.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
     assert!(run.last().is_some());
     let lambda = model.doubled_lagrangian::<f64>(0.5, &[0.0], &[1.0], &[0.1], &[1.0]);
@@ -64,7 +68,11 @@ fn main() -> Result<(), forced_vi::Error> {
     let s = <Mathieu as ForcedLagrangian<2>>::STRUCTURE;
     assert!(s.uses_time && !s.constant_mass);
     let run = Integrator::new(&m, Scheme::lobatto(2)?, 0.05)?
-        .run(InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([1.0, 0.5], [0.0, 0.0]),
+            1.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
     assert!(run.last().is_some());
     Ok(())

@@ -26,7 +26,11 @@ fn main() -> Result<(), forced_vi::Error> {
         lambda: 0.8,
     };
     let run = Integrator::new(&model, Scheme::lobatto(3)?, 0.1)?
-        .run(InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]), 1.0)
+        .solve(
+            InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]),
+            1.0,
+            output::Records,
+        )
         .map_err(|failure| failure.error)?;
     assert!(run.last().is_some());
     let lambda = model.doubled_lagrangian::<f64>(0.0, &[0.0; 2], &[1.0; 2], &[0.1; 2], &[1.0; 2]);

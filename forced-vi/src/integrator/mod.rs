@@ -5,8 +5,10 @@
 //! |---|---|
 //! | [`Integrator`], its builder and its steppers; [`StepOptions`] | this one |
 //! | [`LinearPath`]: the choice of the dense or the sparse step | `path` |
-//! | the run methods: collect, stream, sample, final state | `run` |
+//! | what a run gives back: records, final state, samples, a stream, derivatives | [`output`] |
+//! | [`Integrator::solve`] and its shorthands | `run` |
 
+pub mod output;
 mod path;
 mod run;
 
@@ -38,7 +40,7 @@ pub const MAX_KERNEL_STACK: usize = 4 << 30;
 /// }
 ///
 /// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.01)?
-///     .run(InitialState::from_velocity([1.0], [0.0]), 1.0)
+///     .solve(InitialState::from_velocity([1.0], [0.0]), 1.0, output::Records)
 ///     .map_err(|f| f.error)?;
 /// let end = run.last().unwrap();
 /// assert!((end.q[0] - 1f64.cos()).abs() < 1e-9);
@@ -210,7 +212,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// # }
     /// let run = Integrator::new(&Oscillator, Scheme::lobatto(3)?, 0.1)?
     ///     .tolerances(1e-8, 1e-8)?
-    ///     .run(InitialState::from_velocity([1.0], [0.0]), 10.0)
+    ///     .solve(InitialState::from_velocity([1.0], [0.0]), 10.0, output::Records)
     ///     .map_err(|f| f.error)?;
     /// let end = run.last().unwrap();
     /// assert!((end.q[0] - 10f64.cos()).abs() < 1e-6);

@@ -138,7 +138,7 @@ pub trait ForcedLagrangian<const N: usize> {
         self.force(q, v)
     }
 
-    /// The names of the parameters `θ` that [`crate::Integrator::sensitivities`]
+    /// The names of the parameters `θ` that [`crate::output::Tangents`]
     /// differentiates, in order: the struct's fields for a `#[forced_lagrangian]` model.
     /// The default is none (no parameter columns); a hand-written model declares its
     /// parameters by overriding this, [`Self::parameter_values`],

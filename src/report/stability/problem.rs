@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use forced_vi::{ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId, Stepper};
+use forced_vi::{output, ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId, Stepper};
 
 use super::rows::{BaselineRow, Outcome, Row, MAX_SUBDIVISIONS};
 use crate::baselines::{self, Baseline, OdeSystem};
@@ -239,7 +239,11 @@ pub(super) fn fine_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
         let scheme = Scheme::new(id).ok()?;
         let integ = Integrator::new(&p.model, scheme, h_model).ok()?;
         let traj = integ
-            .run(InitialState::from_velocity(p.q0, p.v0), p.t_final)
+            .solve(
+                InitialState::from_velocity(p.q0, p.v0),
+                p.t_final,
+                output::Records,
+            )
             .ok()?;
         let q: Vec<f64> = traj.last()?.q.iter().copied().collect();
         q.iter().all(|x| x.is_finite()).then_some(q)

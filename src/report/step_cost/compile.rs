@@ -76,7 +76,7 @@ pub fn crate_source(models: usize) -> String {
             .collect();
         let _ = write!(
             src,
-            "{m}\n\n/// One lobatto3 run of M{i}.\npub fn run{i}() -> f64 {{\n    let m = M{i} {{ {} }};\n    let s = Scheme::new(SchemeId::Lobatto(3)).expect(\"scheme\");\n    let integ = Integrator::new(&m, s, 0.01).expect(\"integrator\");\n    let init = InitialState::from_velocity([0.1; {n}], [0.0; {n}]);\n    integ.run(init, 0.1).map(|t| t.last().map_or(0.0, |r| r.q[0])).unwrap_or(f64::NAN)\n}}\n\n",
+            "{m}\n\n/// One lobatto3 run of M{i}.\npub fn run{i}() -> f64 {{\n    let m = M{i} {{ {} }};\n    let s = Scheme::new(SchemeId::Lobatto(3)).expect(\"scheme\");\n    let integ = Integrator::new(&m, s, 0.01).expect(\"integrator\");\n    let init = InitialState::from_velocity([0.1; {n}], [0.0; {n}]);\n    integ.solve(init, 0.1, output::Records).map(|t| t.last().map_or(0.0, |r| r.q[0])).unwrap_or(f64::NAN)\n}}\n\n",
             init.join(", ")
         );
     }

@@ -1,5 +1,5 @@
 //! Ensemble throughput (issue 14): the paper's 25-member ensemble through
-//! [`Integrator::run_ensemble_final`] on rayon pools of 1 and 2 threads.
+//! [`Integrator::ensemble` with `output::Final`] on rayon pools of 1 and 2 threads.
 
 use serde::{Deserialize, Serialize};
 
@@ -97,7 +97,7 @@ pub fn measure(quick: bool) -> Result<Throughput, String> {
     let mut failed = 0;
     let mut rate = |pool: &rayon::ThreadPool| -> Result<f64, String> {
         let t0 = std::time::Instant::now();
-        let ends = pool.install(|| integ.run_ensemble_final(&members, t_final));
+        let ends = pool.install(|| integ.ensemble(&members, t_final, output::Final));
         let secs = t0.elapsed().as_secs_f64();
         failed = ends.iter().filter(|e| e.is_err()).count();
         let steps: usize = ends.iter().flatten().map(|e| e.stats.steps).sum();

@@ -26,7 +26,7 @@ fn scheme(name: &str) -> Result<Scheme, String> {
     Scheme::new(id).map_err(|e| format!("{name}: {e}"))
 }
 
-/// Times one `for_each_step` run: (seconds, stats).
+/// Times one `output::each_step` run: (seconds, stats).
 fn timed<M: ForcedLagrangian<N>, const N: usize>(
     integ: &Integrator<'_, M, N>,
     init: InitialState<N>,
@@ -34,15 +34,19 @@ fn timed<M: ForcedLagrangian<N>, const N: usize>(
 ) -> Result<(f64, RunStats), String> {
     let t0 = Instant::now();
     let stats = integ
-        .for_each_step(init, t_final, |r| {
-            std::hint::black_box(r);
-        })
+        .solve(
+            init,
+            t_final,
+            output::each_step(|r| {
+                std::hint::black_box(r);
+            }),
+        )
         .map_err(|e| e.to_string())?;
     Ok((t0.elapsed().as_secs_f64(), stats))
 }
 
 /// Nanoseconds per step of one paper-model run: with every record (`full`) through
-/// `for_each_step`, or the final state alone (`none`) through `final_state`.
+/// `output::each_step`, or the final state alone (`none`) through `final_state`.
 fn ns_per_step<M: ForcedLagrangian<2>>(
     integ: &Integrator<'_, M, 2>,
     t_final: f64,
@@ -71,11 +75,15 @@ fn allocs_per_step<M: ForcedLagrangian<N>, const N: usize>(
     let mut first: Option<u64> = None;
     let mut last = 0;
     let stats = integ
-        .for_each_step(init, t_final, |_| {
-            let c = counter();
-            first.get_or_insert(c);
-            last = c;
-        })
+        .solve(
+            init,
+            t_final,
+            output::each_step(|_| {
+                let c = counter();
+                first.get_or_insert(c);
+                last = c;
+            }),
+        )
         .map_err(|e| e.to_string())?;
     let first = first.unwrap_or(last);
     Ok(last.saturating_sub(first) as f64 / stats.steps.max(1) as f64)
@@ -199,11 +207,15 @@ pub fn memory(quick: bool) -> Memory {
     let total = marks.last().copied().unwrap_or(0);
     let t0 = Instant::now();
     let mut at = Vec::new();
-    let _ = integ.for_each_step(PAPER_INIT, total as f64 * H, |r| {
-        if marks.contains(&r.step) {
-            at.push((r.step, peak_rss_kib()));
-        }
-    });
+    let _ = integ.solve(
+        PAPER_INIT,
+        total as f64 * H,
+        output::each_step(|r| {
+            if marks.contains(&r.step) {
+                at.push((r.step, peak_rss_kib()));
+            }
+        }),
+    );
     mem.seconds = t0.elapsed().as_secs_f64();
     mem.at = at;
     mem

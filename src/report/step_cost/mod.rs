@@ -21,7 +21,7 @@
 //!   and lobatto3, on the dense and the sparse path ([`scaling`]). Each size runs in its own
 //!   thread, with a stack for the dense path's `N × N` node blocks.
 //! - allocations: counted by the binary's counting allocator between the first and the last
-//!   record of a `for_each_step` run (so the stepper's one-off buffers are excluded), divided
+//!   record of a `output::each_step` run (so the stepper's one-off buffers are excluded), divided
 //!   by the steps.
 //! - compile time of a crate with one model against one with ten, and the peak RSS of a long
 //!   streamed run (full run only for the compile time).

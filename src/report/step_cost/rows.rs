@@ -16,7 +16,7 @@ pub struct Row {
     /// Degrees of freedom.
     pub n: usize,
     /// `full` (every record with velocity, energy, energy balance and Newton statistics,
-    /// through `for_each_step`) or `none` (the final state only, `Integrator::final_state`).
+    /// through `output::each_step`) or `none` (the final state only, `Integrator::final_state`).
     pub diagnostics: &'static str,
     /// `dense` or `sparse`: the linear algebra of the step.
     pub path: &'static str,

@@ -55,14 +55,18 @@ fn run_once<M: ForcedLagrangian<N>, const N: usize>(
     let mut last = 0;
     let t0 = std::time::Instant::now();
     let stats = integ
-        .for_each_step(init, steps as f64 * H, |r| {
-            std::hint::black_box(r);
-            if let Some(c) = counter {
-                let c = c();
-                first.get_or_insert(c);
-                last = c;
-            }
-        })
+        .solve(
+            init,
+            steps as f64 * H,
+            output::each_step(|r| {
+                std::hint::black_box(r);
+                if let Some(c) = counter {
+                    let c = c();
+                    first.get_or_insert(c);
+                    last = c;
+                }
+            }),
+        )
         .map_err(|e| e.to_string())?;
     let ns = t0.elapsed().as_secs_f64() / stats.steps.max(1) as f64 * 1e9;
     let allocs = first.map(|f| last.saturating_sub(f) as f64 / stats.steps.max(1) as f64);

@@ -41,7 +41,7 @@ fn intro(md: &mut String, s: &Summary, quick: bool) {
     let _ = writeln!(
         *md,
         "Written by `cargo run --release -- step-cost{}` in {:.0} s. Data: `step_cost.csv`. \
-         Times are medians over repeats of whole `for_each_step` runs at h = 0.01 from the \
+         Times are medians over repeats of whole `output::each_step` runs at h = 0.01 from the \
          paper's initial state, divided by the steps; generated (`#[forced_lagrangian]`) and \
          hand-written (`forced_vi_scenes::handwritten`, analytic kernels) runs alternate and \
          share the stepper, predictor, Newton options (`NewtonOptions::default()`) and \
@@ -135,7 +135,7 @@ fn diagnostics_table(md: &mut String, s: &Summary) {
     md.push_str(
         "\n### Diagnostics on request\n\n`none` is `Integrator::final_state` (no records: no \
          velocity solve, energy, work or Newton statistics per step); `full` is \
-         `for_each_step` with every record. Generated kernels, ns per step, medians.\n\n\
+         `output::each_step` with every record. Generated kernels, ns per step, medians.\n\n\
          | scheme | none | full | full ÷ none | hand-written none |\n|---|---|---|---|---|\n",
     );
     let mut worst: Option<(f64, &str)> = None;
@@ -188,7 +188,7 @@ fn ensemble_table(md: &mut String, s: &Summary) {
     };
     let _ = writeln!(
         *md,
-        "The paper's ensemble through `Integrator::run_ensemble_final` ({}, h = 0.01, T = {}), \
+        "The paper's ensemble through `Integrator::ensemble` with `output::Final` ({}, h = 0.01, T = {}), \
          on rayon pools of 1 and 2 threads, the two alternating over the repeats; \
          `ensemble_throughput.csv`. Members that failed: {}.\n",
         t.method, t.t_final, t.failed
@@ -358,7 +358,7 @@ fn compile_and_memory(md: &mut String, s: &Summary) {
     }
     let _ = writeln!(
         *md,
-        "Memory: {} steps of the paper model with {} streamed through `for_each_step` in \
+        "Memory: {} steps of the paper model with {} streamed through `output::each_step` in \
          {:.1} s; peak RSS (VmHWM) before the run {}, then {}. The stream runs first, before \
          the large chain sizes, so that their memory does not mask it.",
         s.memory.at.last().map_or(0, |x| x.0),

@@ -333,7 +333,7 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
          over its tolerance (target ≤ 10). The controller bounds the local error per unit step; the final error is \
          those local errors carried to T by the flow, so it is about tol times the flow's amplification A: the mean over \
          {AMPLIFICATION_POINTS} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
-         (`Integrator::sensitivities`, lobatto4 at 4000 steps, member 0 of the ensemble). The last column divides by it: \
+         (`output::Tangents`, lobatto4 at 4000 steps, member 0 of the ensemble). The last column divides by it: \
          on a chaotic scene, where A is large, it is the calibration that is left.\n\n",
         tols.join(", ")
     );
