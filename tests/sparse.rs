@@ -491,11 +491,14 @@ fn orders_on_the_n64_chain_against_scipy() {
         let last = *traj.last().unwrap();
         (last.q - q_ref).amax().max((last.p - p_ref).amax())
     };
+    // lobatto5 stays above 1e-11 (at 64 steps it reaches 1.5e-12, within 15× of the floor
+    // that the Newton tolerance and round-off put at about 1e-13, which bent the fit), and
+    // starts past the pre-asymptotic range (16 → 20 → 24 steps: local orders 15.9, 9.1).
     let cases: [(usize, &[usize]); 4] = [
         (2, &[40, 80, 160, 320]),
         (3, &[32, 64, 128]),
         (4, &[20, 40, 80]),
-        (5, &[24, 32, 48, 64]),
+        (5, &[28, 32, 40, 48]),
     ];
     for (s, steps) in cases {
         let hs: Vec<f64> = steps.iter().map(|&k| t / k as f64).collect();
