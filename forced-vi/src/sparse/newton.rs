@@ -19,6 +19,7 @@ pub(crate) trait SparseSystem {
 
 impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
     type Vector = Vec<f64>;
+    const COSTLY_FACTORS: bool = true;
 
     #[inline(always)]
     fn residual(sys: &mut S, z: &Vec<f64>, r: &mut Vec<f64>) -> Result<(), NewtonFailure> {
