@@ -138,7 +138,28 @@ fn adaptive_estimate_tracks_the_true_local_error() {
 /// rtol = atol from 1e-3 to 1e-12 (automatic first step), and falls with the tolerance at a
 /// slope between 0.8 and 1.2.
 #[test]
-fn adaptive_tolerance_proportionality_on_the_report_scenes() {
+fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto2() {
+    proportionality(2);
+}
+
+#[test]
+fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto3() {
+    proportionality(3);
+}
+
+#[test]
+fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto4() {
+    proportionality(4);
+}
+
+#[test]
+fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto5() {
+    proportionality(5);
+}
+
+/// One scheme of the proportionality sweep (a test per scheme, so that the test threads
+/// share the sweep).
+fn proportionality(s: usize) {
     let tols: Vec<f64> = (3..=12).map(|k| 10f64.powi(-k)).collect();
     // Every scene but the chaotic Duffing oscillator, which amplifies any local error by
     // e^{λT} (its ratio to tol · amplification is the report's `chaos` table).
@@ -148,7 +169,7 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes() {
         .filter(|s| s.name() != "driven_duffing")
     {
         let reference = scene.reference(0).unwrap().clone();
-        for s in 2..=5 {
+        {
             let scheme = Scheme::lobatto(s).unwrap();
             let (mut ts, mut errs) = (Vec::new(), Vec::new());
             // lobatto2 needs 10⁷ steps at 1e-12; the test stops at 1e-9 (the report sweeps
