@@ -118,7 +118,7 @@ where
     reset_peak_rss();
     // Three steps to calibrate, then about `budget` seconds per repeat.
     let (per, _, _) = run_once(&ig, init, 3, None)?;
-    let budget = if quick { 0.05 } else { 0.5 };
+    let budget = if quick { 0.01 } else { 0.5 };
     let steps = ((budget / (per * 1e-9)) as usize).clamp(2, 20_000);
     let repeats = if quick { 3 } else { 5 };
     let (_, stats, allocs) = run_once(&ig, init, steps, counter)?;
