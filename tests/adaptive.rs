@@ -3,7 +3,7 @@
 
 use forced_vi::prelude::*;
 use forced_vi::Error;
-use forced_vi_scenes::models::{CoupledVanDerPol, DampedOscillator};
+use forced_vi_scenes::models::{CoupledVanDerPol, DampedOscillator, DoublePendulumFriction};
 use forced_vi_scenes::scenes;
 
 /// The least-squares slope of log y against log x.
@@ -71,18 +71,28 @@ fn adaptive_estimate_tracks_the_true_local_error() {
     let fine = Scheme::lobatto(5).unwrap();
     let vdp = &CoupledVanDerPol::PAPER;
     let osc = &DampedOscillator::DEFAULT;
+    // An angle-dependent mass matrix: the reference's node blocks interpolated from the
+    // step's (`crate::control`) include `E` and `C`.
+    let pend = &DoublePendulumFriction::DEFAULT;
     type Step<'a> = &'a dyn Fn(&Scheme, (f64, f64), bool) -> ([f64; 4], f64);
-    let cases: [(&str, Step); 2] = [
+    let cases: [(&str, Step); 3] = [
         ("van der Pol", &|sch, ht, ad| {
             end_state(vdp, sch, ht, (PAPER_Q0, PAPER_V0), ad)
         }),
         ("damped oscillator", &|sch, ht, ad| {
             end_state(osc, sch, ht, ([1.0, 0.0], [0.0, 0.5]), ad)
         }),
+        ("double pendulum", &|sch, ht, ad| {
+            end_state(pend, sch, ht, ([1.0, 0.5], [0.0, 0.0]), ad)
+        }),
     ];
     for (name, step) in cases {
         // From where the local error of every scheme is above round-off at three steps.
-        let h_start = if name == "van der Pol" { 0.4 } else { 1.6 };
+        let h_start = match name {
+            "van der Pol" => 0.4,
+            "double pendulum" => 0.4,
+            _ => 1.6,
+        };
         for s in 2..=5 {
             let scheme = Scheme::lobatto(s).unwrap();
             let p = scheme.order() as i32;

@@ -23,9 +23,10 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) vs: Vec<SVector<f64, N>>,
     pub(crate) grads: Vec<NodeGradient<N>>,
     pub(crate) jacs: Vec<NodeJacobian<N>>,
-    /// For a constant mass matrix, the `E` part of the Jacobian for the step size `base_h`.
+    /// For a constant mass matrix, the `E` part of the Jacobian of a unit step, built on the
+    /// first Jacobian (`base_built`); a step of size `h` takes it over `h`.
     pub(crate) base: DMatrix<f64>,
-    pub(crate) base_h: f64,
+    pub(crate) base_built: bool,
     /// Holonomic constraints (DESIGN §11): their number `m`, and scratch for `g` and, per
     /// control point, `G = ∂g/∂q` (`m × N`). The unknowns `ŵ_j = h² λ_j`, `j = 0 … s − 2`,
     /// follow the increments in `z`; the rows `g(x_j)`, `j = 1 … s − 1`, follow the
@@ -33,6 +34,10 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) cons: usize,
     pub(crate) gval: Vec<f64>,
     pub(crate) gjac: Vec<DMatrix<f64>>,
+    /// The node blocks in `jacs` were given (interpolated from another scheme's, for the
+    /// error estimate of [`crate::control`]): the Jacobian is assembled from them without
+    /// evaluating the node kernels.
+    pub(crate) blocks_given: bool,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
@@ -94,7 +99,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
     fn jacobian(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
         self.nodes(z);
         let (sch, h) = (self.scheme, self.h);
-        for i in 0..sch.quadrature_nodes() {
+        let evaluated = if self.blocks_given {
+            0
+        } else {
+            sch.quadrature_nodes()
+        };
+        for i in 0..evaluated {
             let t = self.t0 + sch.c()[i] * h;
             let nj = self.model.node_jacobian_at(t, &self.xs[i], &self.vs[i]);
             if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
@@ -110,30 +120,47 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {
-            // E is the same at every node and every step: its part is built once per h.
-            if self.base_h != h {
+            // E is the same at every node and every step: its part is built once, and
+            // scaled by 1/h (adaptive steps change h on every step).
+            if !self.base_built {
                 let e = self.jacs[0].e;
                 let bs = self.base.as_mut_slice();
                 bs.fill(0.0);
                 for t in sch.jacobian_terms() {
-                    add_block(bs, rows, t.j, t.m, t.e / h, &e);
+                    add_block(bs, rows, t.j, t.m, t.e, &e);
                 }
-                self.base_h = h;
+                self.base_built = true;
             }
-            jac.copy_from(&self.base);
+            let inv_h = 1.0 / h;
+            let js = jac.as_mut_slice();
+            for (x, y) in js.iter_mut().zip(self.base.as_slice()) {
+                *x = y * inv_h;
+            }
         } else {
             jac.fill(0.0);
         }
         let js = jac.as_mut_slice();
-        for t in sch.jacobian_terms() {
-            let nj = &self.jacs[t.i];
-            if t.a != 0.0 {
-                add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+        if constant_mass {
+            // `C ≡ 0` and `E` done: only the terms on `A` and `B` (for Lobatto, where
+            // `Φ = I`, `s − 1` of the first and `(s − 1)²` of the second).
+            for t in sch.mixed_jacobian_terms() {
+                let nj = &self.jacs[t.i];
+                if t.a != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+                }
+                if t.b != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.b, &nj.b);
+                }
             }
-            if t.b != 0.0 {
-                add_block(js, rows, t.j, t.m, t.b, &nj.b);
-            }
-            if !constant_mass {
+        } else {
+            for t in sch.jacobian_terms() {
+                let nj = &self.jacs[t.i];
+                if t.a != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+                }
+                if t.b != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.b, &nj.b);
+                }
                 if t.c != 0.0 {
                     add_block(js, rows, t.j, t.m, t.c, &nj.c);
                 }

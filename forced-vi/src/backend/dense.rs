@@ -52,10 +52,11 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 grads: vec![grad; r],
                 jacs: Vec::with_capacity(r),
                 base: DMatrix::zeros(dim, dim),
-                base_h: f64::NAN,
+                base_built: false,
                 cons,
                 gval: vec![0.0; cons],
                 gjac: vec![DMatrix::zeros(cons, N); s],
+                blocks_given: false,
             },
             impulse: Vec::new(),
             mu: vec![0.0; cons],
@@ -69,6 +70,38 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
+    /// Gives the next [`StepBackend::solve`] its node blocks instead of evaluating them:
+    /// `Σ_i w_{ji} B_i` at its quadrature node `j`, from the blocks `B_i` of the last
+    /// Jacobian that `from` evaluated (row `j` of `weights`: the Lagrange basis of `from`'s
+    /// quadrature nodes at node `j`). The error estimate's cheap Jacobian
+    /// ([`crate::control`]). Returns false, and gives nothing, if `from` has no blocks or
+    /// the sizes do not match.
+    pub(crate) fn seed_node_blocks(&mut self, from: &Self, weights: &[f64]) -> bool {
+        let (r, src) = (self.prob.scheme.quadrature_nodes(), &from.prob.jacs);
+        if src.is_empty() || weights.len() != r * src.len() {
+            return false;
+        }
+        let jacs = &mut self.prob.jacs;
+        // In place: an `N × N` block is not copied through the stack per node.
+        if jacs.len() != r {
+            jacs.clear();
+            jacs.extend((0..r).map(|_| src[0]));
+        }
+        for (nj, row) in jacs.iter_mut().zip(weights.chunks_exact(src.len())) {
+            for blk in [&mut nj.a, &mut nj.b, &mut nj.c, &mut nj.e] {
+                blk.fill(0.0);
+            }
+            for (&w, b) in row.iter().zip(src) {
+                nj.a.zip_apply(&b.a, |x, y| *x += w * y);
+                nj.b.zip_apply(&b.b, |x, y| *x += w * y);
+                nj.c.zip_apply(&b.c, |x, y| *x += w * y);
+                nj.e.zip_apply(&b.e, |x, y| *x += w * y);
+            }
+        }
+        self.prob.blocks_given = true;
+        true
+    }
+
     /// The end of a constrained step (DESIGN §11): the multiplier `μ = λ_{s−1}` and the
     /// velocity `v_{k+1}` with `L_v(q_{k+1}, v_{k+1}) + h b_{s−1} G(q_{k+1})ᵀ μ = p̃` and
     /// `G(q_{k+1}) v_{k+1} = 0`, by Newton on the saddle-point matrix `[[E, h b Gᵀ], [G, 0]]`;
@@ -210,6 +243,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         // scene then bends at 4e-13), where a fresh one lands far below it.
         self.newton.invalidate();
         let solved = self.newton.solve(prob, &mut self.z, scale);
+        self.prob.blocks_given = false;
         if self.prob.cons == 0 {
             return solved.map_err(StepFailure::Newton);
         }

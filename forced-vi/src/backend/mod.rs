@@ -229,6 +229,19 @@ macro_rules! forward {
     };
 }
 
+impl<M: ForcedLagrangian<N>, const N: usize> Backend<'_, M, N> {
+    /// Gives the next [`StepBackend::solve`] node blocks interpolated from those of `from`'s
+    /// last Jacobian (see [`DenseBackend::seed_node_blocks`]); false, and nothing given, where
+    /// the backend evaluates its own (the sparse one).
+    pub(crate) fn seed_node_blocks(&mut self, from: &Self, weights: &[f64]) -> bool {
+        match (self, from) {
+            (Backend::Dense(to), Backend::Dense(from)) => to.seed_node_blocks(from, weights),
+            #[cfg(feature = "sparse")]
+            _ => false,
+        }
+    }
+}
+
 impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn layout(&self) -> Layout {

@@ -65,6 +65,9 @@ pub struct Scheme {
     psi: Vec<f64>,
     /// The non-zero terms of the Jacobian chain rule, see [`JacobianTerm`].
     terms: Vec<JacobianTerm>,
+    /// Those of `terms` with a non-zero coefficient on `A`, `B` or `C`: all there is besides
+    /// the `E` part for a constant mass matrix.
+    mixed: Vec<JacobianTerm>,
     /// `ℓ_m(1 + d_j)`, row-major `s × s`: the previous step's polynomial extrapolated to
     /// this step's control points (the predictor for equal steps).
     extrapolation: Vec<f64>,
@@ -198,6 +201,11 @@ impl Scheme {
             b,
             phi,
             psi,
+            mixed: terms
+                .iter()
+                .copied()
+                .filter(|t| t.a != 0.0 || t.b != 0.0 || t.c != 0.0)
+                .collect(),
             terms,
             extrapolation,
             end_slope,
@@ -242,6 +250,11 @@ impl Scheme {
     /// The non-zero terms of the Jacobian chain rule.
     pub fn jacobian_terms(&self) -> &[JacobianTerm] {
         &self.terms
+    }
+
+    /// The terms with a non-zero coefficient on `A`, `B` or `C`.
+    pub(crate) fn mixed_jacobian_terms(&self) -> &[JacobianTerm] {
+        &self.mixed
     }
 
     /// The classical order of the scheme.

@@ -119,6 +119,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 }
             }
         }
+        if !self.block_weights.is_empty() {
+            reference.seed_node_blocks(&self.backend, &self.block_weights);
+        }
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);

@@ -142,6 +142,11 @@ pub struct Stepper<'a, M, const N: usize> {
     /// `m − 1`).
     reference: Option<Backend<'a, M, N>>,
     lift: Vec<f64>,
+    /// Adaptive runs of a Lobatto scheme: the Lagrange basis of the step's quadrature nodes
+    /// at the reference's (row `j`: its node `j`), which interpolates the step's node blocks
+    /// into the reference's Jacobian (see [`crate::control`]); empty where the reference
+    /// evaluates its own.
+    block_weights: Vec<f64>,
     options: StepOptions,
     h: f64,
     t_final: f64,

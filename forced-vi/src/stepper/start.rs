@@ -60,6 +60,16 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 lift.extend((1..=s1).map(|m| scheme.basis_at(dj, m)));
             }
         }
+        // The step's node blocks at the reference's quadrature nodes: a Lobatto scheme's
+        // quadrature nodes are its control points, so the same basis interpolates them.
+        let mut block_weights = Vec::new();
+        if let Some(r) = &reference {
+            if scheme.c() == scheme.d() && model.constraint_count() == 0 {
+                for &cj in r.scheme().c() {
+                    block_weights.extend((0..scheme.stages()).map(|m| scheme.basis_at(cj, m)));
+                }
+            }
+        }
         // The step's multipliers (at all its control points) at the reference's.
         let mut lift_lambda = Vec::new();
         if let Some(r) = &reference {
@@ -94,6 +104,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             backend,
             reference,
             lift,
+            block_weights,
             lift_lambda,
             options,
             h,
