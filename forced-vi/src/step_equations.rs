@@ -42,26 +42,25 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     fn nodes(&mut self, z: &DVector<f64>) {
-        let s = self.scheme.stages();
-        let zs = z.as_slice();
+        let (zs, _) = z.as_slice().as_chunks::<N>();
         let inv_h = 1.0 / self.h;
-        for i in 0..self.scheme.quadrature_nodes() {
+        for (i, (xi, vi)) in self.xs.iter_mut().zip(self.vs.iter_mut()).enumerate() {
+            let (phi, psi) = self.scheme.basis_rows(i);
             let mut x = self.q0;
             let mut v = SVector::<f64, N>::zeros();
-            for j in 1..s {
-                let zj = &zs[(j - 1) * N..j * N];
-                let (phi, psi) = (self.scheme.phi(i, j), self.scheme.psi(i, j));
-                if phi != 0.0 {
+            // Control point 0 is `q_k` itself (increment 0).
+            for ((zj, &ph), &ps) in zs.iter().zip(&phi[1..]).zip(&psi[1..]) {
+                if ph != 0.0 {
                     for a in 0..N {
-                        x[a] += phi * zj[a];
+                        x[a] += ph * zj[a];
                     }
                 }
                 for a in 0..N {
-                    v[a] += psi * zj[a];
+                    v[a] += ps * zj[a];
                 }
             }
-            self.xs[i] = x;
-            self.vs[i] = v * inv_h;
+            *xi = x;
+            *vi = v * inv_h;
         }
     }
 }
@@ -78,17 +77,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             }
             self.grads[i] = g;
         }
-        let rs = r.as_mut_slice();
-        for j in 0..sch.stages() - 1 {
+        let (rs, _) = r.as_mut_slice().as_chunks_mut::<N>();
+        for (j, rj) in rs.iter_mut().take(sch.stages() - 1).enumerate() {
             let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
-            for (i, g) in self.grads.iter().enumerate() {
-                let bi = sch.b()[i];
-                let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+            let (wf, wl) = sch.residual_weights(j);
+            for ((g, &f), &l) in self.grads.iter().zip(wf).zip(wl) {
+                let cf = f * h;
                 for a in 0..N {
-                    gj[a] += cf * g.fq[a] + cl * g.lv[a];
+                    gj[a] += cf * g.fq[a] + l * g.lv[a];
                 }
             }
-            rs[j * N..(j + 1) * N].copy_from_slice(gj.as_slice());
+            rj.copy_from_slice(gj.as_slice());
         }
         if self.cons > 0 {
             self.constraint_rows(z, r, None)?;

@@ -70,15 +70,57 @@ impl DenseLu {
     }
 }
 
-/// The elimination of [`DenseLu::factor`] for order `K`, known at compile time.
+/// The elimination of [`DenseLu::factor`] for order `K`, known at compile time: the
+/// columns as `[f64; K]` arrays, so that every bound is a constant and no index is checked
+/// at run time; the operations and their order are those of [`eliminate`].
 #[inline(never)]
 fn factor_in_place<const K: usize>(
     m: &mut [f64],
     piv: &mut [usize],
     scale: &mut [f64],
 ) -> Result<(), NewtonFailure> {
-    let (m, piv, scale) = (&mut m[..K * K], &mut piv[..K], &mut scale[..K]);
-    eliminate(K, m, piv, scale)
+    let (cols, _) = m.as_chunks_mut::<K>();
+    let (Some(cols), Some(piv)) = (cols.get_mut(..K), piv.get_mut(..K)) else {
+        return eliminate(K, m, piv, scale);
+    };
+    let mut sc = [0.0f64; K];
+    for (i, r) in sc.iter_mut().enumerate() {
+        *r = cols.iter().fold(0.0f64, |s, col| s.max(col[i].abs()));
+    }
+    for k in 0..K {
+        let (mut p, mut best) = (k, cols[k][k].abs());
+        for i in k + 1..K {
+            let x = cols[k][i].abs();
+            if x > best {
+                best = x;
+                p = i;
+            }
+        }
+        if best <= sc[p] * f64::EPSILON * 1e-3 || best == 0.0 {
+            return Err(NewtonFailure::SingularJacobian);
+        }
+        piv[k] = p;
+        if p != k {
+            for col in cols.iter_mut() {
+                col.swap(k, p);
+            }
+            sc.swap(k, p);
+        }
+        let inv = 1.0 / cols[k][k];
+        for x in &mut cols[k][k + 1..] {
+            *x *= inv;
+        }
+        let l = cols[k];
+        for col in &mut cols[k + 1..] {
+            let u = col[k];
+            if u != 0.0 {
+                for i in k + 1..K {
+                    col[i] -= l[i] * u;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// [`DenseLu::factor`]'s elimination for any order.
@@ -140,10 +182,34 @@ fn eliminate(
     Ok(())
 }
 
-/// The substitutions of [`DenseLu::solve_in_place`] for order `K`, known at compile time.
+/// The substitutions of [`DenseLu::solve_in_place`] for order `K`, known at compile time
+/// (the columns as arrays, as in [`factor_in_place`]; the operations of [`substitute`]).
 #[inline(never)]
 fn solve_fixed<const K: usize>(m: &[f64], piv: &[usize], x: &mut [f64]) {
-    substitute(K, &m[..K * K], &piv[..K], &mut x[..K]);
+    let (cols, _) = m.as_chunks::<K>();
+    let (Some(cols), Some(piv), Some(x)) = (cols.get(..K), piv.get(..K), x.get_mut(..K)) else {
+        return substitute(K, m, piv, x);
+    };
+    for (k, &p) in piv.iter().enumerate() {
+        x.swap(k, p);
+    }
+    for j in 0..K {
+        let xj = x[j];
+        if xj != 0.0 {
+            for i in j + 1..K {
+                x[i] -= cols[j][i] * xj;
+            }
+        }
+    }
+    for j in (0..K).rev() {
+        x[j] /= cols[j][j];
+        let xj = x[j];
+        if xj != 0.0 {
+            for i in 0..j {
+                x[i] -= cols[j][i] * xj;
+            }
+        }
+    }
 }
 
 /// [`DenseLu::solve_in_place`]'s substitutions for any order.

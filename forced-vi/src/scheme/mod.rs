@@ -68,6 +68,9 @@ pub struct Scheme {
     /// Those of `terms` with a non-zero coefficient on `A`, `B` or `C`: all there is besides
     /// the `E` part for a constant mass matrix.
     mixed: Vec<JacobianTerm>,
+    /// `b_i Φ_ij` and `b_i Ψ_ij`, row `j` (see [`Scheme::residual_weights`]).
+    res_phi: Vec<f64>,
+    res_psi: Vec<f64>,
     /// `ℓ_m(1 + d_j)`, row-major `s × s`: the previous step's polynomial extrapolated to
     /// this step's control points (the predictor for equal steps).
     extrapolation: Vec<f64>,
@@ -194,6 +197,13 @@ impl Scheme {
             .map(|row| row.iter().map(|x| x.abs()).sum::<f64>())
             .fold(0.0, f64::max);
         let end_slope = (0..s).map(|m| lagrange_derivative(&d, m, 1.0)).collect();
+        let r = c.len();
+        let res_phi: Vec<f64> = (0..s * r)
+            .map(|k| b[k % r] * phi[(k % r) * s + k / r])
+            .collect();
+        let res_psi: Vec<f64> = (0..s * r)
+            .map(|k| b[k % r] * psi[(k % r) * s + k / r])
+            .collect();
         Scheme {
             id,
             d,
@@ -206,6 +216,8 @@ impl Scheme {
                 .copied()
                 .filter(|t| t.a != 0.0 || t.b != 0.0 || t.c != 0.0)
                 .collect(),
+            res_phi,
+            res_psi,
             terms,
             extrapolation,
             end_slope,
@@ -246,6 +258,22 @@ impl Scheme {
     #[inline]
     pub fn psi(&self, i: usize, j: usize) -> f64 {
         self.psi[i * self.d.len() + j]
+    }
+    /// `(Φ_i·, Ψ_i·)`: row `i` of each, `s` entries.
+    #[inline]
+    pub(crate) fn basis_rows(&self, i: usize) -> (&[f64], &[f64]) {
+        let s = self.d.len();
+        (&self.phi[i * s..(i + 1) * s], &self.psi[i * s..(i + 1) * s])
+    }
+    /// `(b_i Φ_ij, b_i Ψ_ij)` for `i = 0 … r − 1`: the weights of node `i`'s `L_q + F` (times
+    /// `h`) and `L_v` in residual row `j`.
+    #[inline]
+    pub(crate) fn residual_weights(&self, j: usize) -> (&[f64], &[f64]) {
+        let r = self.c.len();
+        (
+            &self.res_phi[j * r..(j + 1) * r],
+            &self.res_psi[j * r..(j + 1) * r],
+        )
     }
     /// The non-zero terms of the Jacobian chain rule.
     pub fn jacobian_terms(&self) -> &[JacobianTerm] {
