@@ -86,6 +86,7 @@ impl Study for VariationalRuns<'_> {
             err_final: f64::NAN,
             max_energy_balance_err: f64::NAN,
             subdivided_steps: 0,
+            rejected_steps: 0,
             seconds: 0.0,
         }
     }

@@ -78,6 +78,7 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
             err_final: f64::NAN,
             max_energy_balance_err: 0.0,
             subdivided_steps: 0,
+            rejected_steps: 0,
             seconds: 0.0,
         };
         let init = InitialState::from_velocity(self.q0, self.v0);
@@ -133,6 +134,7 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
         row.steps_done = stats.steps;
         row.max_newton_iters = stats.max_newton_iterations;
         row.subdivided_steps = stats.subdivided_steps;
+        row.rejected_steps = stats.rejected_steps;
         row.max_energy_balance_err = max_eb;
         row.outcome = match error {
             Some(e) => Outcome::Failed(e.kind()),

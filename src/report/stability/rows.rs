@@ -55,6 +55,8 @@ pub struct Row {
     pub max_energy_balance_err: f64,
     /// Steps that needed subdivision.
     pub subdivided_steps: usize,
+    /// Attempts an adaptive run rejected (each a step solve and an estimate).
+    pub rejected_steps: usize,
     /// Wall time of the run, seconds.
     pub seconds: f64,
 }
