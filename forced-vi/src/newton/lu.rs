@@ -89,10 +89,9 @@ fn factor_in_place<const K: usize>(
     }
     for k in 0..K {
         let (mut p, mut best) = (k, cols[k][k].abs());
-        for i in k + 1..K {
-            let x = cols[k][i].abs();
-            if x > best {
-                best = x;
+        for (i, x) in cols[k].iter().enumerate().skip(k + 1) {
+            if x.abs() > best {
+                best = x.abs();
                 p = i;
             }
         }
