@@ -139,27 +139,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             jac.fill(0.0);
         }
         let js = jac.as_mut_slice();
-        if constant_mass {
-            // `C ≡ 0` and `E` done: only the terms on `A` and `B` (for Lobatto, where
-            // `Φ = I`, `s − 1` of the first and `(s − 1)²` of the second).
-            for t in sch.mixed_jacobian_terms() {
-                let nj = &self.jacs[t.i];
-                if t.a != 0.0 {
-                    add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
-                }
-                if t.b != 0.0 {
-                    add_block(js, rows, t.j, t.m, t.b, &nj.b);
-                }
-            }
+        // A constant mass: `C ≡ 0` and `E` done, so only the terms on `A` and `B` (for
+        // Lobatto, where `Φ = I`, `s − 1` of the first and `(s − 1)²` of the second).
+        let terms = if constant_mass {
+            sch.mixed_jacobian_terms()
         } else {
-            for t in sch.jacobian_terms() {
-                let nj = &self.jacs[t.i];
-                if t.a != 0.0 {
-                    add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
-                }
-                if t.b != 0.0 {
-                    add_block(js, rows, t.j, t.m, t.b, &nj.b);
-                }
+            sch.jacobian_terms()
+        };
+        for t in terms {
+            let nj = &self.jacs[t.i];
+            if t.a != 0.0 {
+                add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+            }
+            if t.b != 0.0 {
+                add_block(js, rows, t.j, t.m, t.b, &nj.b);
+            }
+            if !constant_mass {
                 if t.c != 0.0 {
                     add_block(js, rows, t.j, t.m, t.c, &nj.c);
                 }
