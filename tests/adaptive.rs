@@ -1,5 +1,5 @@
 //! Error control: the reference-scheme estimate, tolerance proportionality, dense output and
-//! the typed errors of adaptive runs. `cargo test --release --test adaptive`.
+//! the typed errors of adaptive runs. `cargo test --release --test scenes_suite adaptive::`.
 
 use forced_vi::prelude::*;
 use forced_vi::Error;

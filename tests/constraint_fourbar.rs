@@ -3,7 +3,7 @@
 //! same equations (`[[M, Gᵀ], [G, 0]] (a, λ) = (F, −vᵀ∇²g v)`) integrated by ode_solvers'
 //! DOP853 at rtol = atol = 10⁻¹³ (its final-time nodes fixed as in `src/baselines.rs`:
 //! the system is autonomous, so the c₁₂ = c₁₃ = 0 defect does not apply).
-//! `cargo test --workspace --release --test constraint_fourbar`.
+//! `cargo test --workspace --release --test models_suite constraint_fourbar::`.
 
 use forced_vi::prelude::*;
 use nalgebra::{DMatrix, DVector};

@@ -1,7 +1,7 @@
 //! Holonomic constraints (DESIGN §11, issue 25): the constrained Lobatto schemes (RATTLE at
 //! s = 2) against minimal coordinates, the constraints kept at every step, Noether's
 //! momentum of a symmetric constrained model, and the typed errors.
-//! `cargo test --workspace --release --test constraints`.
+//! `cargo test --workspace --release --test models_suite constraints::`.
 
 use forced_vi::output;
 use forced_vi::{Error, ForcedLagrangian, InitialState, Integrator, LinearPath, Scalar, Scheme};

@@ -2,7 +2,7 @@
 //! and the energy balance `E − E0 − W + ∫L_t` against independent references (mpmath Taylor
 //! series at 25 digits, cross-checked with scipy DOP853 and Radau at 1e-13:
 //! `scripts/driven_reference.py`).
-//! `cargo test --release --test driven`.
+//! `cargo test --release --test scenes_suite driven::`.
 
 use forced_vi::prelude::*;
 use forced_vi::Error;

@@ -3,7 +3,7 @@
 //! (`StiffVanDerPol`, μ up to 10⁷), a run never panics and ends either in a trajectory whose
 //! every record is finite or in a typed error whose partial trajectory is all finite.
 //!
-//! `cargo test --workspace --release --test extreme_props`: 2 × 10⁴ cases in release builds (fewer in
+//! `cargo test --workspace --release --test models_suite extreme_props::`: 2 × 10⁴ cases in release builds (fewer in
 //! debug builds), with short final times (at most 200 steps).
 
 use forced_vi::prelude::*;

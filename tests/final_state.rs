@@ -1,5 +1,5 @@
 //! The final state alone (`Integrator::final_state`): the same answer as a full run, without
-//! the per-step diagnostics. `cargo test --workspace --release --test final_state`.
+//! the per-step diagnostics. `cargo test --workspace --release --test models_suite final_state::`.
 
 use forced_vi::prelude::*;
 use forced_vi::Error;

@@ -2,7 +2,7 @@
 //! the factored step Jacobian against central differences of the runs themselves, the
 //! symplecticity of the unforced map in `(q, p)`, the two backends against each other, and
 //! adaptive runs against fixed ones.
-//! `cargo test --workspace --release --test sensitivity`.
+//! `cargo test --workspace --release --test models_suite sensitivity::`.
 
 use forced_vi::output;
 use forced_vi::{

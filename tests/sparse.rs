@@ -1,7 +1,7 @@
 //! The sparse step (DESIGN §9) on the hand-written FPU chain and membrane of
 //! `forced_vi_models::large`: agreement with the dense path, the kernels against the dense
 //! node blocks, large n on a small stack, typed errors, no allocation per step, orders.
-//! `cargo test --workspace --release --test sparse`.
+//! `cargo test --workspace --release --test models_suite sparse::`.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

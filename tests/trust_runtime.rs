@@ -1,6 +1,6 @@
 //! Trust: every bad or extreme input ends in a correct `Ok` or a typed error that keeps the
 //! steps before it; never a panic, an abort, a hang or a wrong number. The runtime classes
-//! of the trust issue: `cargo test --release --test trust_runtime`.
+//! of the trust issue: `cargo test --release --test models_suite trust_runtime::`.
 
 use forced_vi::prelude::*;
 use forced_vi::{Error, NewtonOptions, SchemeError};

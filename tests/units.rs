@@ -1,6 +1,6 @@
-//! The root crate's unit tests, as one integration test so that `cargo test` does not build
+//! The root crate's unit tests, in an integration test so that `cargo test` does not build
 //! the report library a second time with `cfg(test)` (it is the slowest crate of the build).
-//! `cargo test --workspace --release --test units`.
+//! `cargo test --workspace --release --test scenes_suite units::`.
 
 mod baselines {
     use forced_vi::ForcedLagrangian;
