@@ -2,6 +2,10 @@
 //! modules of one test binary; each file is one topic, and its tests keep their names
 //! (`cargo test --workspace --release extreme_` still selects the extreme cases).
 
+#[path = "constraint_fourbar.rs"]
+mod constraint_fourbar;
+#[path = "constraints.rs"]
+mod constraints;
 #[path = "extreme.rs"]
 mod extreme;
 #[path = "extreme_props.rs"]
@@ -12,6 +16,8 @@ mod final_state;
 mod generated_models;
 #[path = "macro_kernels.rs"]
 mod macro_kernels;
+#[path = "sensitivity.rs"]
+mod sensitivity;
 #[path = "sparse.rs"]
 mod sparse;
 #[path = "sparse_macro.rs"]
@@ -20,9 +26,3 @@ mod sparse_macro;
 mod trust_macro;
 #[path = "trust_runtime.rs"]
 mod trust_runtime;
-#[path = "sensitivity.rs"]
-mod sensitivity;
-#[path = "constraints.rs"]
-mod constraints;
-#[path = "constraint_fourbar.rs"]
-mod constraint_fourbar;
