@@ -93,6 +93,7 @@ pub(crate) enum StepFailure {
     /// The step ended at a singular mass matrix or across one.
     SingularMass { rcond: f64 },
     /// A sparse kernel wrote outside the pattern recorded at the first evaluation.
+    #[cfg_attr(not(feature = "sparse"), allow(dead_code))]
     OutsidePattern,
     /// What a run keeps per step (an adjoint's tape) no longer fits in memory.
     Memory { records: usize },

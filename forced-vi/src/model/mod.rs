@@ -13,6 +13,7 @@ use crate::scalar::{lift, Scalar};
 
 mod sparse_node;
 
+#[cfg(feature = "sparse")]
 pub(crate) use sparse_node::DualConstraints;
 pub use sparse_node::{Block, ConstraintSink, NodeBlocks, NodePattern, NodeSink, SparseNode};
 

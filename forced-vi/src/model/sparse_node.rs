@@ -425,6 +425,7 @@ impl<'a> ConstraintSink<'a> {
 /// Newton iteration only, whose residual (`g` and `Gᵀλ`) is exact either way. The pattern is
 /// recorded from the gradients at the state given and at a perturbed one, so that an entry
 /// that happens to vanish there is still recorded.
+#[cfg(feature = "sparse")]
 pub(crate) struct DualConstraints<'a, M, const N: usize> {
     /// The model.
     pub(crate) model: &'a M,
@@ -432,6 +433,7 @@ pub(crate) struct DualConstraints<'a, M, const N: usize> {
     pub(crate) node: &'a dyn SparseNode,
 }
 
+#[cfg(feature = "sparse")]
 impl<M: crate::ForcedLagrangian<N>, const N: usize> DualConstraints<'_, M, N> {
     /// The gradients `∂g_k/∂q_a` at `(t, q)`, by `a`: `grads[a * m + k]`.
     fn gradients(&self, t: f64, q: &[f64], grads: &mut [f64]) {
@@ -452,6 +454,7 @@ impl<M: crate::ForcedLagrangian<N>, const N: usize> DualConstraints<'_, M, N> {
     }
 }
 
+#[cfg(feature = "sparse")]
 impl<M: crate::ForcedLagrangian<N>, const N: usize> SparseNode for DualConstraints<'_, M, N> {
     fn dof(&self) -> usize {
         self.node.dof()
