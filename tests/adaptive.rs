@@ -489,3 +489,71 @@ fn adaptive_step_bounds() {
     );
     assert!(f.trajectory.records.len() <= 1);
 }
+
+/// A tolerance just above round-off: each step's estimate passes its floor, but the
+/// rounding errors of the run's many steps would add up past the tolerance. The run stops
+/// with `ToleranceBelowRoundOff` before that step, keeping the steps it took, where it
+/// returned `Ok` 31 times off the tolerance before (lobatto3 at 1e-15 on the damped
+/// oscillator, 25846 steps, error 3.1e-14 against the exact solution); at 1e-12 the same run
+/// is `Ok` within the tolerance.
+#[test]
+fn adaptive_tolerance_near_round_off_is_a_typed_error_not_a_wrong_ok() {
+    let model = DampedOscillator::DEFAULT;
+    let init = InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]);
+    let integ =
+        |tol: f64| Integrator::adaptive(&model, Scheme::lobatto(3).unwrap(), tol, tol).unwrap();
+    let f = integ(1e-15).solve(init, 10.0, output::Records).unwrap_err();
+    let Error::ToleranceBelowRoundOff { t, steps, ratio } = f.error else {
+        panic!("{}", f.error)
+    };
+    // The step that would pass 3 is not taken: the ratio is just above 3, and the records
+    // end where the run stopped, one per accepted step after the initial one.
+    assert!((3.0..3.5).contains(&ratio), "{ratio}");
+    assert!(t > 0.0 && t < 10.0, "{t}");
+    assert_eq!(f.trajectory.records.len(), steps + 1);
+    assert_eq!(f.trajectory.records.last().unwrap().t, t);
+    assert_eq!(f.error.kind(), "tolerance_below_round_off");
+    let ok = integ(1e-12).solve(init, 10.0, output::Records).unwrap();
+    assert_eq!(ok.records.last().unwrap().t, 10.0);
+}
+
+/// The class on every non-chaotic report scene: at tolerances of 1e-14 and 1e-15, lobatto3
+/// and lobatto4 end either in a typed round-off error (`ToleranceBelowRoundOff`, or
+/// `StepSizeTooSmall` where each step's estimate meets its floor) or in an `Ok` within the
+/// README's promise of 100·tol of the independent reference.
+#[test]
+fn adaptive_tolerance_near_round_off_on_the_report_scenes() {
+    for scene in scenes::all()
+        .unwrap()
+        .into_iter()
+        .filter(|s| s.name() != "driven_duffing")
+    {
+        let reference = scene.reference(0).unwrap().clone();
+        for s in [3, 4] {
+            for tol in [1e-14, 1e-15] {
+                let scheme = Scheme::lobatto(s).unwrap();
+                match scene.run_adaptive(&scheme, tol, 0) {
+                    Ok(out) => {
+                        let err = (out.end.q.iter().zip(&reference.q))
+                            .chain(out.end.p.iter().zip(&reference.p))
+                            .map(|(a, b)| (a - b).abs())
+                            .fold(0.0, f64::max);
+                        assert!(
+                            err <= 100.0 * tol,
+                            "{} lobatto{s} tol {tol:e}: Ok with error {err:e}",
+                            scene.name()
+                        );
+                    }
+                    Err(e) => {
+                        let e = e.to_string();
+                        assert!(
+                            e.contains("round-off") || e.contains("too small for the tolerance"),
+                            "{} lobatto{s} tol {tol:e}: {e}",
+                            scene.name()
+                        );
+                    }
+                }
+            }
+        }
+    }
+}

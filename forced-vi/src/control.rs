@@ -51,6 +51,20 @@
 //! [`Error::StepSizeTooSmall`]. Each difference first loses the round-off of the sums it
 //! compares (`4ε` of their terms), which smaller steps do not reduce.
 //!
+//! **Round-off over the run.** That floor holds each step's estimate, not the run's sum: a
+//! tolerance a little above it lets every step pass while the rounding errors of thousands
+//! of steps add up past the tolerance (measured, lobatto3 at rtol = atol = 1e-15 on the
+//! damped oscillator: `Ok` after 25846 steps with an error of 3.1e-14, 31 times the
+//! tolerance). So the run adds up each accepted step's `2ε|y|` in the same weighted norm as
+//! a random walk, `R_k = sqrt(Σ_{j≤k} ‖2ε y_j‖²)` (the rounding errors of successive steps
+//! are not correlated), and stops with [`Error::ToleranceBelowRoundOff`] before the step
+//! that would take `R` past 3, keeping the steps before it. The 3 is measured: on the
+//! report's non-chaotic scenes at rtol = atol = 1e-14 and 1e-15 (lobatto3 to lobatto6), the
+//! runs that ended at more than 10 times the tolerance reached `R` = 4.1 to 35, and those
+//! within it at most 2.6, except one Kepler run (`R` = 2.5, 10.1 times the tolerance, on a
+//! scene that amplifies any error about 60-fold). At 1e-12 `R` reaches 3 only after about
+//! 2·10⁸ steps of a state of size 1.
+
 //! **The controller.** A PI controller (Gustafsson; Hairer & Wanner, IV.2) on
 //! `‖e‖ ∝ h^p` (per unit step): `h_new = h · clamp(0.9 ‖e‖^{−0.7/p} ‖e_prev‖^{0.4/p}, 0.2,
 //! 5)`, with no growth right after a rejection, within
@@ -121,6 +135,20 @@ impl<const N: usize> Tolerance<N> {
             }
         }
         (sum / (2 * N).max(1) as f64).sqrt()
+    }
+
+    /// The squared weighted RMS norm of the round-off `2ε|y_i|` of a state `(q, p)`: one
+    /// step's term of the run's accumulated round-off (see [`crate::control`]).
+    pub(crate) fn round_off_sq(&self, (q, p): (&[f64], &[f64])) -> f64 {
+        let mut sum = 0.0;
+        for i in 0..N {
+            for y in [q[i], p[i]] {
+                let size = y.abs();
+                let e = 2.0 * f64::EPSILON * size / (self.atol[i] + self.rtol[i] * size);
+                sum += e * e;
+            }
+        }
+        sum / (2 * N).max(1) as f64
     }
 }
 

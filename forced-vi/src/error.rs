@@ -170,6 +170,20 @@ pub enum Error {
         /// The step it needed.
         h: f64,
     },
+    /// An adaptive run whose tolerance lies so close to `f64` round-off that the rounding
+    /// errors of its steps, added up as a random walk (`sqrt(Σ_k (2ε|y_k|)²)` in the
+    /// tolerance's weighted norm), would pass three times the tolerance: the run stops
+    /// before that step, so that no `Ok` claims an accuracy the arithmetic cannot give (see
+    /// [`crate::control`]). Fewer steps (more stages) or a looser tolerance get further.
+    #[error("the round-off of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: the tolerance is too close to f64 round-off for this run; loosen it or use more stages")]
+    ToleranceBelowRoundOff {
+        /// Where the run stopped.
+        t: f64,
+        /// The steps accepted until then.
+        steps: usize,
+        /// The accumulated round-off with the next step, in units of the tolerance.
+        ratio: f64,
+    },
     /// An adaptive run reached its step cap ([`crate::StepOptions::max_steps`]).
     #[error("step cap of {steps} steps reached at t = {t}")]
     MaxStepsReached {
@@ -300,6 +314,7 @@ impl Error {
             Error::InconsistentInitialState { .. } => "inconsistent_initial_state".into(),
             Error::UnsupportedConstraints { .. } => "unsupported_constraints".into(),
             Error::StepSizeTooSmall { .. } => "step_size_too_small".into(),
+            Error::ToleranceBelowRoundOff { .. } => "tolerance_below_round_off".into(),
             Error::InvalidStepBounds { .. } => "invalid_step_bounds".into(),
             Error::MaxStepsReached { .. } => "max_steps_reached".into(),
             Error::InvalidNewtonOptions { .. } => "invalid_newton_options".into(),

@@ -10,6 +10,10 @@ use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::StepRecord;
 
+/// The accumulated round-off, in units of the tolerance, past which a run stops (see
+/// [`crate::control`]).
+const ROUND_OFF_MAX: f64 = 3.0;
+
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// One adaptive step from `t`: accepted when the estimated error per unit step is at
     /// most one, retried with a smaller step otherwise (see [`crate::control`]).
@@ -42,17 +46,36 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             // Per unit step: the local errors of a run add up to about `tol`.
             let per_unit = span / h;
-            // The tangent (of a sensitivity run) goes through accepted steps only.
             let solved = self.attempt(h, &mut iters).and_then(|res| {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
-                if err <= 1.0 {
-                    self.carry()?;
-                }
                 Ok((res, err))
             });
+            // The run's round-off with this step (see `crate::control`): past the
+            // tolerance, the step is not taken.
+            let round_off = match &solved {
+                Ok((_, err)) if *err <= 1.0 => {
+                    let st = &self.state;
+                    self.round_off_sq + tol.round_off_sq((&st.q.sum, &st.p.sum))
+                }
+                _ => 0.0,
+            };
+            if round_off > ROUND_OFF_MAX * ROUND_OFF_MAX {
+                self.state.copy_from(&self.saved);
+                return Err(Error::ToleranceBelowRoundOff {
+                    t: t0,
+                    steps: self.stats.steps,
+                    ratio: round_off.sqrt(),
+                });
+            }
+            // The tangent (of a sensitivity run) goes through accepted steps only.
+            let solved = match solved {
+                Ok((res, err)) if err <= 1.0 => self.carry().map(|()| (res, err)),
+                other => other,
+            };
             match solved {
                 Ok((res, err)) => {
                     if err <= 1.0 {
+                        self.round_off_sq = round_off;
                         self.estimate = err / per_unit;
                         self.h_next = self.controller.accept(h, err);
                         self.t = if last { self.t_final } else { t0 + h };

@@ -147,6 +147,9 @@ pub struct Stepper<'a, M, const N: usize> {
     /// into the reference's Jacobian (see [`crate::control`]); empty where the reference
     /// evaluates its own.
     block_weights: Vec<f64>,
+    /// Adaptive runs: the accumulated round-off, squared, in the tolerance's norm (see
+    /// [`crate::control`]).
+    round_off_sq: f64,
     options: StepOptions,
     h: f64,
     t_final: f64,

@@ -105,6 +105,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             reference,
             lift,
             block_weights,
+            round_off_sq: 0.0,
             lift_lambda,
             options,
             h,
