@@ -29,6 +29,8 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11), and the multipliers `λ_{s−1}` at its end.
     impulse: Vec<f64>,
     mu: Vec<f64>,
+    /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
+    carry: bool,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
@@ -65,6 +67,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             rhs: DVector::zeros(0),
             adjoint: None,
             tangent: None,
+            carry: false,
         }
     }
 }
@@ -240,8 +243,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         // A fresh Jacobian at each step: carried over from the step before, its factors
         // take 10–17 % off a small model's step but leave the iterate only as exact as the
         // Newton tolerance (measured: the energy balance of lobatto5 on the driven Duffing
-        // scene then bends at 4e-13), where a fresh one lands far below it.
-        self.newton.invalidate();
+        // scene then bends at 4e-13), where a fresh one lands far below it. The error
+        // estimate's one iteration may carry them ([`StepBackend::carry_factors`]).
+        if !std::mem::take(&mut self.carry) {
+            self.newton.invalidate();
+        }
         let solved = self.newton.solve(prob, &mut self.z, scale);
         self.prob.blocks_given = false;
         if self.prob.cons == 0 {
@@ -267,6 +273,21 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     #[inline(always)]
     fn last_iterations(&self) -> usize {
         self.newton.last_iterations()
+    }
+
+    fn carry_factors(&mut self, h: f64) -> bool {
+        // A constrained model's step Jacobian has constraint rows that do not scale with
+        // `1 / h`: its factors are not carried.
+        self.carry = self.prob.cons == 0 && self.newton.carry_factors(h);
+        self.carry
+    }
+
+    fn carried_error(&self) -> f64 {
+        self.newton.carried_error()
+    }
+
+    fn reject_carry(&mut self) {
+        self.newton.reject_carry()
     }
 
     #[inline(always)]

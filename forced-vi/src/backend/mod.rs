@@ -122,6 +122,15 @@ pub(crate) trait StepBackend {
     ) -> Result<NewtonReport, StepFailure>;
     /// Linear solves of the last [`Self::solve`], converged or not.
     fn last_iterations(&self) -> usize;
+    /// The error estimate's backend: lets the next [`Self::solve`], of a step of size `h`,
+    /// start from the factors of the last one (see `crate::newton`'s iteration); returns
+    /// whether it will. Without it, every solve of the estimate makes fresh factors.
+    fn carry_factors(&mut self, h: f64) -> bool;
+    /// After a solve with carried factors: a bound (max-norm) on the error they left in
+    /// [`Self::z`]; zero after any other solve.
+    fn carried_error(&self) -> f64;
+    /// Refuses the last solve's carried factors: the next solves make fresh ones.
+    fn reject_carry(&mut self);
     /// `L_q + F` at quadrature node `i` of the last residual evaluation.
     fn node_fq(&self, i: usize) -> &[f64];
     /// The position at quadrature node `i`.
@@ -273,6 +282,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn last_iterations(&self) -> usize {
         forward!(self, b => b.last_iterations())
+    }
+    #[inline(always)]
+    fn carry_factors(&mut self, h: f64) -> bool {
+        forward!(self, b => b.carry_factors(h))
+    }
+    #[inline(always)]
+    fn carried_error(&self) -> f64 {
+        forward!(self, b => b.carried_error())
+    }
+    #[inline(always)]
+    fn reject_carry(&mut self) {
+        forward!(self, b => b.reject_carry())
     }
     #[inline(always)]
     fn node_fq(&self, i: usize) -> &[f64] {

@@ -38,6 +38,8 @@ pub(crate) struct SparseBackend<'a> {
     impulse: Vec<f64>,
     mu: Vec<f64>,
     ptil: Vec<f64>,
+    /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
+    carry: bool,
 }
 
 impl<'a> SparseBackend<'a> {
@@ -75,6 +77,7 @@ impl<'a> SparseBackend<'a> {
             tangent: None,
             impulse: vec![0.0; if saddle.is_some() { n } else { 0 }],
             ptil: vec![0.0; if saddle.is_some() { n } else { 0 }],
+            carry: false,
             mu: vec![0.0; m],
             saddle,
         })
@@ -174,9 +177,10 @@ impl StepBackend for SparseBackend<'_> {
         // Simplified Newton across steps: a step of the same size starts from the factors
         // of the last Jacobian (a sparse LU costs more than the rest of a step), which the
         // iteration refreshes when they contract slowly (see `crate::newton`). Not for
-        // one-iteration solves (the error estimate's), whose iterate must be a full Newton
-        // step.
-        if !(same_h && self.newton.options().max_iterations > 1) {
+        // one-iteration solves (the error estimate's), unless they were told to carry the
+        // factors ([`StepBackend::carry_factors`]).
+        let carry = std::mem::take(&mut self.carry);
+        if !carry && !(same_h && self.newton.options().max_iterations > 1) {
             self.newton.invalidate();
         }
         let solved = self.newton.solve(prob, &mut self.z, scale);
@@ -202,6 +206,21 @@ impl StepBackend for SparseBackend<'_> {
     #[inline(always)]
     fn last_iterations(&self) -> usize {
         self.newton.last_iterations()
+    }
+
+    fn carry_factors(&mut self, h: f64) -> bool {
+        // A constrained model's step Jacobian has constraint rows that do not scale with
+        // `1 / h`: its factors are not carried.
+        self.carry = self.saddle.is_none() && self.newton.carry_factors(h);
+        self.carry
+    }
+
+    fn carried_error(&self) -> f64 {
+        self.newton.carried_error()
+    }
+
+    fn reject_carry(&mut self) {
+        self.newton.reject_carry()
     }
 
     #[inline(always)]

@@ -122,6 +122,23 @@ impl Newton {
         self.iteration.have_factors = false;
     }
 
+    /// Lets the next solve, of a step of size `h`, start from the last solve's factors;
+    /// returns whether it will (see `Iteration::carry_factors`).
+    pub(crate) fn carry_factors(&mut self, h: f64) -> bool {
+        self.iteration.carry_factors(h)
+    }
+
+    /// The error bound that carried factors left in the last solve's iterate (zero if
+    /// none were carried; see `Iteration::carried_error`).
+    pub(crate) fn carried_error(&self) -> f64 {
+        self.iteration.carried_error()
+    }
+
+    /// Refuses the last solve's carried factors (see `Iteration::reject_carry`).
+    pub(crate) fn reject_carry(&mut self) {
+        self.iteration.reject_carry()
+    }
+
     /// Evaluates and factors the Jacobian of `sys` at `z` (for the tangent of a solution,
     /// DESIGN §12); a following [`Newton::solve`] makes its own factors.
     pub(crate) fn factor_at<S: NonlinearSystem>(

@@ -155,3 +155,106 @@ fn options_are_validated() {
 fn lu_err(a: &DMatrix<f64>) -> Option<NewtonFailure> {
     DenseLu::new(a.nrows()).factor(a).err()
 }
+
+/// A step-like system `R(z) = K z / h + c · sin(z) − b`: the `1 / h` mass term of the step
+/// equations and a nonlinearity; counts its Jacobians.
+struct StepLike {
+    k: DMatrix<f64>,
+    h: f64,
+    c: f64,
+    b: DVector<f64>,
+    jacobians: usize,
+}
+impl NonlinearSystem for StepLike {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        r.copy_from(&(&self.k * z / self.h + z.map(|x| self.c * x.sin()) - &self.b));
+        Ok(())
+    }
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        self.jacobians += 1;
+        j.copy_from(&(&self.k / self.h));
+        for i in 0..z.len() {
+            j[(i, i)] += self.c * z[i].cos();
+        }
+        Ok(())
+    }
+}
+
+/// One Newton iteration, as the error estimate runs it, from `z0`: `(iterate, Jacobians)`.
+fn one_iteration(n: &mut Newton, sys: &mut StepLike, z0: &DVector<f64>) -> DVector<f64> {
+    let mut z = z0.clone();
+    // One iteration is what is asked: it ends in `MaxIterations` unless already converged.
+    let _ = n.solve(sys, &mut z, 1.0);
+    z
+}
+
+#[test]
+fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off() {
+    let opts = NewtonOptions::default().max_iterations(1);
+    let k = DMatrix::from_row_slice(3, 3, &[2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 2.0]);
+    let b = DVector::from_vec(vec![0.3, -0.2, 0.1]);
+    let z0 = DVector::from_vec(vec![0.0, 0.0, 0.0]);
+    let mut sys = StepLike {
+        k: k.clone(),
+        h: 0.1,
+        c: 0.2,
+        b: b.clone(),
+        jacobians: 0,
+    };
+    // The exact solution at h = 0.07, by full Newton.
+    let exact = |sys: &mut StepLike| {
+        let mut n = Newton::new(3, NewtonOptions::default().simplified(false));
+        let mut z = z0.clone();
+        n.solve(sys, &mut z, 1.0).expect("exact");
+        z
+    };
+    let mut n = Newton::new(3, opts);
+    // No factors yet: nothing to carry.
+    assert!(!n.carry_factors(0.1));
+    one_iteration(&mut n, &mut sys, &z0);
+    assert_eq!(sys.jacobians, 1);
+    // A smaller step: the factors of h = 0.1 serve, scaled by 0.07 / 0.1 (unscaled, the
+    // correction would be 43 % too large, and the residual check would refresh them); the
+    // iterate is about as close to the solution as a fresh Newton iteration's.
+    sys.h = 0.07;
+    let star = exact(&mut sys);
+    sys.jacobians = 0;
+    assert!(n.carry_factors(0.07));
+    let carried = one_iteration(&mut n, &mut sys, &z0);
+    assert_eq!(sys.jacobians, 0, "the carried factors were kept");
+    // Its error is about what it reports (the contraction of its two corrections), and far
+    // below the start's.
+    let (ec, bound) = ((&carried - &star).amax(), n.carried_error());
+    assert!(
+        bound > 0.0 && ec <= 2.0 * bound,
+        "error {ec:e}, bound {bound:e}"
+    );
+    assert!(ec <= 1e-4 * (&z0 - &star).amax(), "carried error {ec:e}");
+    // A stiff nonlinearity (c = 500, so h·c = 35) makes the old factors useless: the
+    // residual check catches it, the iteration is redone with fresh factors, and it equals
+    // a fresh solve bit for bit.
+    let mut stiff = StepLike {
+        k,
+        h: 0.07,
+        c: 500.0,
+        b,
+        jacobians: 0,
+    };
+    assert!(n.carry_factors(0.07));
+    let redone = one_iteration(&mut n, &mut stiff, &z0);
+    assert_eq!(stiff.jacobians, 1, "refreshed");
+    let fresh = one_iteration(&mut Newton::new(3, opts), &mut stiff, &z0);
+    assert_eq!(redone, fresh);
+    assert_eq!(n.carried_error(), 0.0);
+    // After a failure, carrying pauses for 0, then 1, 3, 7, … solves: the stiff factors
+    // fail on the other system (the second failure in a row), so the next solve makes
+    // fresh ones, and the one after that carries again.
+    assert!(n.carry_factors(0.07));
+    sys.jacobians = 0;
+    let _ = one_iteration(&mut n, &mut sys, &z0);
+    assert_eq!(sys.jacobians, 1, "refreshed");
+    assert!(!n.carry_factors(0.07));
+    let _ = one_iteration(&mut n, &mut sys, &z0);
+    assert_eq!(sys.jacobians, 2, "fresh");
+    assert!(n.carry_factors(0.07));
+}

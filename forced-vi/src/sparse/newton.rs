@@ -65,6 +65,23 @@ impl SparseNewton {
         self.iteration.have_factors = false;
     }
 
+    /// Lets the next solve, of a step of size `h`, start from the last solve's factors;
+    /// returns whether it will (see `Iteration::carry_factors`).
+    pub(crate) fn carry_factors(&mut self, h: f64) -> bool {
+        self.iteration.carry_factors(h)
+    }
+
+    /// The error bound that carried factors left in the last solve's iterate (zero if
+    /// none were carried; see `Iteration::carried_error`).
+    pub(crate) fn carried_error(&self) -> f64 {
+        self.iteration.carried_error()
+    }
+
+    /// Refuses the last solve's carried factors (see `Iteration::reject_carry`).
+    pub(crate) fn reject_carry(&mut self) {
+        self.iteration.reject_carry()
+    }
+
     /// Linear solves done by the last call to [`SparseNewton::solve`].
     pub(crate) fn last_iterations(&self) -> usize {
         self.iteration.last_iterations

@@ -115,49 +115,70 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let lay = self.backend.layout();
         let z = self.backend.z();
         let (lay_r, r1) = (reference.layout(), reference.scheme().stages() - 1);
-        let zr = reference.z_mut();
-        for j in 1..=r1 {
-            let row = &self.lift[(j - 1) * s1..j * s1];
-            for a in 0..N {
-                zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
-            }
-        }
-        // A constrained model: the multipliers, interpolated in time from the step's
-        // (`λ_0 … λ_{s−2}` in `z`, `λ_{s−1}` at its end) to the reference's control points.
         let cons = self.model.constraint_count();
-        if cons > 0 {
-            let mu = self.backend.end_multipliers();
-            let s = s1 + 1;
-            for j in 0..r1 {
-                let row = &self.lift_lambda[j * s..(j + 1) * s];
-                for k in 0..cons {
-                    let at = |m: usize| {
-                        if m + 1 < s {
-                            z[lay.multiplier(m, k)]
-                        } else {
-                            mu.get(k).copied().unwrap_or(0.0)
-                        }
-                    };
-                    zr[lay_r.multiplier(j, k)] = (0..s).map(|m| row[m] * at(m)).sum();
-                }
-            }
-        }
-        if !self.block_weights.is_empty() {
-            reference.seed_node_blocks(&self.backend, &self.block_weights);
-        }
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
-        match reference.solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale) {
-            Ok(rep) => *iters += rep.iterations,
-            // One iteration is what the estimate asks for (its options cap it there).
-            Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
-                *iters += reference.last_iterations()
+        // Twice at most: with the factors of the last estimate, where they still serve,
+        // and with fresh ones if the error they leave is not well below the tolerance.
+        for fresh in [false, true] {
+            let zr = reference.z_mut();
+            for j in 1..=r1 {
+                let row = &self.lift[(j - 1) * s1..j * s1];
+                for a in 0..N {
+                    zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
+                }
             }
-            Err(f) => {
-                *iters += reference.last_iterations();
-                return Err(f);
+            // A constrained model: the multipliers, interpolated in time from the step's
+            // (`λ_0 … λ_{s−2}` in `z`, `λ_{s−1}` at its end) to the reference's control
+            // points.
+            if cons > 0 {
+                let mu = self.backend.end_multipliers();
+                let s = s1 + 1;
+                for j in 0..r1 {
+                    let row = &self.lift_lambda[j * s..(j + 1) * s];
+                    for k in 0..cons {
+                        let at = |m: usize| {
+                            if m + 1 < s {
+                                z[lay.multiplier(m, k)]
+                            } else {
+                                mu.get(k).copied().unwrap_or(0.0)
+                            }
+                        };
+                        zr[lay_r.multiplier(j, k)] = (0..s).map(|m| row[m] * at(m)).sum();
+                    }
+                }
             }
+            // Fresh factors take the step's node blocks (see `crate::control`).
+            let carried = !fresh && reference.carry_factors(h);
+            if !carried && !self.block_weights.is_empty() {
+                reference.seed_node_blocks(&self.backend, &self.block_weights);
+            }
+            match reference.solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale) {
+                Ok(rep) => *iters += rep.iterations,
+                // One iteration is what the estimate asks for (its options cap it there).
+                Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
+                    *iters += reference.last_iterations()
+                }
+                Err(f) => {
+                    *iters += reference.last_iterations();
+                    return Err(f);
+                }
+            }
+            // The carried factors' error, as an error in every position and momentum: at
+            // most a tenth of the tolerance, or the estimate is made again with fresh
+            // factors.
+            let left = reference.carried_error();
+            if left > 0.0 {
+                self.err.0.fill(left);
+                self.err.1.fill(left);
+                let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
+                if tol.error_norm(per_unit, (&self.err.0, &self.err.1), now) > 0.1 {
+                    reference.reject_carry();
+                    continue;
+                }
+            }
+            break;
         }
         let zr = reference.z();
         let (eq, ep) = (&mut self.err.0, &mut self.err.1);
