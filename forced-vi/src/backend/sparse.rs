@@ -180,7 +180,8 @@ impl StepBackend for SparseBackend<'_> {
         // one-iteration solves (the error estimate's), unless they were told to carry the
         // factors ([`StepBackend::carry_factors`]).
         let carry = std::mem::take(&mut self.carry);
-        if !carry && !(same_h && self.newton.options().max_iterations > 1) {
+        let simplified_across = same_h && self.newton.options().max_iterations > 1;
+        if !(carry || simplified_across) {
             self.newton.invalidate();
         }
         let solved = self.newton.solve(prob, &mut self.z, scale);
