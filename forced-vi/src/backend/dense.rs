@@ -278,16 +278,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     fn carry_factors(&mut self, h: f64) -> bool {
         // A constrained model's step Jacobian has constraint rows that do not scale with
         // `1 / h`: its factors are not carried.
-        self.carry = self.prob.cons == 0 && self.newton.carry_factors(h);
+        self.carry = self.prob.cons == 0 && self.newton.iteration.carry_factors(h);
         self.carry
     }
 
     fn carried_error(&self) -> f64 {
-        self.newton.carried_error()
+        self.newton.iteration.carried_error()
     }
 
     fn reject_carry(&mut self) {
-        self.newton.reject_carry()
+        self.newton.iteration.reject_carry()
     }
 
     #[inline(always)]

@@ -212,16 +212,16 @@ impl StepBackend for SparseBackend<'_> {
     fn carry_factors(&mut self, h: f64) -> bool {
         // A constrained model's step Jacobian has constraint rows that do not scale with
         // `1 / h`: its factors are not carried.
-        self.carry = self.saddle.is_none() && self.newton.carry_factors(h);
+        self.carry = self.saddle.is_none() && self.newton.iteration.carry_factors(h);
         self.carry
     }
 
     fn carried_error(&self) -> f64 {
-        self.newton.carried_error()
+        self.newton.iteration.carried_error()
     }
 
     fn reject_carry(&mut self) {
-        self.newton.reject_carry()
+        self.newton.iteration.reject_carry()
     }
 
     #[inline(always)]

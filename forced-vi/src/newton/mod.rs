@@ -54,7 +54,9 @@ pub struct NewtonReport {
 /// The Newton solver with its reusable buffers.
 #[derive(Clone, Debug)]
 pub struct Newton {
-    iteration: Iteration<DVector<f64>>,
+    /// The iteration; the error estimate's backend reaches its carried factors
+    /// (`Iteration::carry_factors`) here.
+    pub(crate) iteration: Iteration<DVector<f64>>,
     linear: DenseLinear,
 }
 
@@ -120,23 +122,6 @@ impl Newton {
     /// Forgets reusable Jacobian factors (call when the problem changes).
     pub fn invalidate(&mut self) {
         self.iteration.have_factors = false;
-    }
-
-    /// Lets the next solve, of a step of size `h`, start from the last solve's factors;
-    /// returns whether it will (see `Iteration::carry_factors`).
-    pub(crate) fn carry_factors(&mut self, h: f64) -> bool {
-        self.iteration.carry_factors(h)
-    }
-
-    /// The error bound that carried factors left in the last solve's iterate (zero if
-    /// none were carried; see `Iteration::carried_error`).
-    pub(crate) fn carried_error(&self) -> f64 {
-        self.iteration.carried_error()
-    }
-
-    /// Refuses the last solve's carried factors (see `Iteration::reject_carry`).
-    pub(crate) fn reject_carry(&mut self) {
-        self.iteration.reject_carry()
     }
 
     /// Evaluates and factors the Jacobian of `sys` at `z` (for the tangent of a solution,

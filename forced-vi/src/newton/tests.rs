@@ -210,7 +210,7 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     };
     let mut n = Newton::new(3, opts);
     // No factors yet: nothing to carry.
-    assert!(!n.carry_factors(0.1));
+    assert!(!n.iteration.carry_factors(0.1));
     one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 1);
     // A smaller step: the factors of h = 0.1 serve, scaled by 0.07 / 0.1 (unscaled, the
@@ -219,12 +219,12 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     sys.h = 0.07;
     let star = exact(&mut sys);
     sys.jacobians = 0;
-    assert!(n.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07));
     let carried = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 0, "the carried factors were kept");
     // Its error is about what it reports (the contraction of its two corrections), and far
     // below the start's.
-    let (ec, bound) = ((&carried - &star).amax(), n.carried_error());
+    let (ec, bound) = ((&carried - &star).amax(), n.iteration.carried_error());
     assert!(
         bound > 0.0 && ec <= 2.0 * bound,
         "error {ec:e}, bound {bound:e}"
@@ -240,21 +240,21 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
         b,
         jacobians: 0,
     };
-    assert!(n.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07));
     let redone = one_iteration(&mut n, &mut stiff, &z0);
     assert_eq!(stiff.jacobians, 1, "refreshed");
     let fresh = one_iteration(&mut Newton::new(3, opts), &mut stiff, &z0);
     assert_eq!(redone, fresh);
-    assert_eq!(n.carried_error(), 0.0);
+    assert_eq!(n.iteration.carried_error(), 0.0);
     // After a failure, carrying pauses for 0, then 1, 3, 7, … solves: the stiff factors
     // fail on the other system (the second failure in a row), so the next solve makes
     // fresh ones, and the one after that carries again.
-    assert!(n.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07));
     sys.jacobians = 0;
     let _ = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 1, "refreshed");
-    assert!(!n.carry_factors(0.07));
+    assert!(!n.iteration.carry_factors(0.07));
     let _ = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 2, "fresh");
-    assert!(n.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07));
 }

@@ -41,7 +41,9 @@ impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
 
 /// The solver and its buffers, made once.
 pub(crate) struct SparseNewton {
-    iteration: Iteration<Vec<f64>>,
+    /// The iteration; the error estimate's backend reaches its carried factors
+    /// (`Iteration::carry_factors`) here.
+    pub(crate) iteration: Iteration<Vec<f64>>,
     lu: SparseLu,
 }
 
@@ -63,23 +65,6 @@ impl SparseNewton {
     /// Forgets the factors.
     pub(crate) fn invalidate(&mut self) {
         self.iteration.have_factors = false;
-    }
-
-    /// Lets the next solve, of a step of size `h`, start from the last solve's factors;
-    /// returns whether it will (see `Iteration::carry_factors`).
-    pub(crate) fn carry_factors(&mut self, h: f64) -> bool {
-        self.iteration.carry_factors(h)
-    }
-
-    /// The error bound that carried factors left in the last solve's iterate (zero if
-    /// none were carried; see `Iteration::carried_error`).
-    pub(crate) fn carried_error(&self) -> f64 {
-        self.iteration.carried_error()
-    }
-
-    /// Refuses the last solve's carried factors (see `Iteration::reject_carry`).
-    pub(crate) fn reject_carry(&mut self) {
-        self.iteration.reject_carry()
     }
 
     /// Linear solves done by the last call to [`SparseNewton::solve`].
