@@ -93,7 +93,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         }
         #[cfg(feature = "sparse")]
         if let Some(backend) = self.sparse_backend(init, scheme, newton)? {
-            return Ok(Backend::Sparse(backend));
+            return Ok(Backend::Sparse(Box::new(backend)));
         }
         #[cfg(not(feature = "sparse"))]
         if self.linear_path == LinearPath::Sparse {

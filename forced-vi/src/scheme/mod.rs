@@ -21,6 +21,8 @@ pub use coefficients::lobatto_nodes_weights;
 use coefficients::{lagrange, lagrange_derivative};
 pub use id::SchemeId;
 
+use std::sync::Arc;
+
 use crate::error::SchemeError;
 
 /// The most control points a Lobatto scheme may have (order `2 · 32 − 2 = 62`).
@@ -53,9 +55,18 @@ fn check_stages(s: usize) -> Result<usize, SchemeError> {
 }
 
 /// A scheme's coefficients and the matrices derived from them.
+///
+/// Cloning is cheap: the tables are shared (a reference count), so a scheme can be cloned
+/// into every run without copying them.
 #[derive(Clone, Debug)]
 pub struct Scheme {
     id: SchemeId,
+    t: Arc<Tables>,
+}
+
+/// The tables of a [`Scheme`], made once and shared by its clones.
+#[derive(Debug)]
+struct Tables {
     d: Vec<f64>,
     c: Vec<f64>,
     b: Vec<f64>,
@@ -206,22 +217,24 @@ impl Scheme {
             .collect();
         Scheme {
             id,
-            d,
-            c,
-            b,
-            phi,
-            psi,
-            mixed: terms
-                .iter()
-                .copied()
-                .filter(|t| t.a != 0.0 || t.b != 0.0 || t.c != 0.0)
-                .collect(),
-            res_phi,
-            res_psi,
-            terms,
-            extrapolation,
-            end_slope,
-            extrapolates: lebesgue <= MAX_PREDICTOR_LEBESGUE,
+            t: Arc::new(Tables {
+                d,
+                c,
+                b,
+                phi,
+                psi,
+                mixed: terms
+                    .iter()
+                    .copied()
+                    .filter(|t| t.a != 0.0 || t.b != 0.0 || t.c != 0.0)
+                    .collect(),
+                res_phi,
+                res_psi,
+                terms,
+                extrapolation,
+                end_slope,
+                extrapolates: lebesgue <= MAX_PREDICTOR_LEBESGUE,
+            }),
         }
     }
 
@@ -231,58 +244,61 @@ impl Scheme {
     }
     /// Number of control points `s` (including both ends of the step).
     pub fn stages(&self) -> usize {
-        self.d.len()
+        self.t.d.len()
     }
     /// Number of quadrature nodes `r`.
     pub fn quadrature_nodes(&self) -> usize {
-        self.c.len()
+        self.t.c.len()
     }
     /// Control-point positions `d` on `[0, 1]`.
     pub fn d(&self) -> &[f64] {
-        &self.d
+        &self.t.d
     }
     /// Quadrature nodes `c` on `[0, 1]`.
     pub fn c(&self) -> &[f64] {
-        &self.c
+        &self.t.c
     }
     /// Quadrature weights `b`.
     pub fn b(&self) -> &[f64] {
-        &self.b
+        &self.t.b
     }
     /// `Φ_ij = ℓ_j(c_i)`.
     #[inline]
     pub fn phi(&self, i: usize, j: usize) -> f64 {
-        self.phi[i * self.d.len() + j]
+        self.t.phi[i * self.t.d.len() + j]
     }
     /// `Ψ_ij = ℓ_j'(c_i)`.
     #[inline]
     pub fn psi(&self, i: usize, j: usize) -> f64 {
-        self.psi[i * self.d.len() + j]
+        self.t.psi[i * self.t.d.len() + j]
     }
     /// `(Φ_i·, Ψ_i·)`: row `i` of each, `s` entries.
     #[inline]
     pub(crate) fn basis_rows(&self, i: usize) -> (&[f64], &[f64]) {
-        let s = self.d.len();
-        (&self.phi[i * s..(i + 1) * s], &self.psi[i * s..(i + 1) * s])
+        let s = self.t.d.len();
+        (
+            &self.t.phi[i * s..(i + 1) * s],
+            &self.t.psi[i * s..(i + 1) * s],
+        )
     }
     /// `(b_i Φ_ij, b_i Ψ_ij)` for `i = 0 … r − 1`: the weights of node `i`'s `L_q + F` (times
     /// `h`) and `L_v` in residual row `j`.
     #[inline]
     pub(crate) fn residual_weights(&self, j: usize) -> (&[f64], &[f64]) {
-        let r = self.c.len();
+        let r = self.t.c.len();
         (
-            &self.res_phi[j * r..(j + 1) * r],
-            &self.res_psi[j * r..(j + 1) * r],
+            &self.t.res_phi[j * r..(j + 1) * r],
+            &self.t.res_psi[j * r..(j + 1) * r],
         )
     }
     /// The non-zero terms of the Jacobian chain rule.
     pub fn jacobian_terms(&self) -> &[JacobianTerm] {
-        &self.terms
+        &self.t.terms
     }
 
     /// The terms with a non-zero coefficient on `A`, `B` or `C`.
     pub(crate) fn mixed_jacobian_terms(&self) -> &[JacobianTerm] {
-        &self.mixed
+        &self.t.mixed
     }
 
     /// The classical order of the scheme.
@@ -307,24 +323,24 @@ impl Scheme {
     /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
     #[inline]
     pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {
-        self.extrapolation[j * self.d.len() + m]
+        self.t.extrapolation[j * self.t.d.len() + m]
     }
 
     /// Whether the predictor extrapolates the previous step's polynomial (false for
     /// Lobatto schemes with more than 9 stages, whose extrapolation amplifies round-off).
     #[inline]
     pub(crate) fn extrapolates(&self) -> bool {
-        self.extrapolates
+        self.t.extrapolates
     }
 
     /// `ℓ_m'(1)`.
     #[inline]
     pub(crate) fn end_slope(&self, m: usize) -> f64 {
-        self.end_slope[m]
+        self.t.end_slope[m]
     }
 
     /// Evaluates the Lagrange basis on the control points at `tau` (in units of the step).
     pub(crate) fn basis_at(&self, tau: f64, j: usize) -> f64 {
-        lagrange(&self.d, j, tau)
+        lagrange(&self.t.d, j, tau)
     }
 }
