@@ -21,7 +21,7 @@ pub use coefficients::lobatto_nodes_weights;
 use coefficients::{lagrange, lagrange_derivative};
 pub use id::SchemeId;
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use crate::error::SchemeError;
 
@@ -89,6 +89,25 @@ struct Tables {
     end_slope: Vec<f64>,
     /// Whether the predictor may extrapolate (see [`MAX_PREDICTOR_LEBESGUE`]).
     extrapolates: bool,
+    /// The error estimate's scheme and its tables, made on first use (adaptive runs).
+    estimate: OnceLock<EstimateTables>,
+}
+
+/// What an adaptive run's error estimate needs from a scheme ([`crate::control`]), made once
+/// per scheme and shared by its clones and runs.
+#[derive(Debug)]
+pub(crate) struct EstimateTables {
+    /// [`Scheme::error_reference`].
+    pub(crate) reference: Scheme,
+    /// `ℓ_m(d'_j)`: the step polynomial at the reference's control points `j = 1 … r − 1`
+    /// (row `j − 1`, column `m − 1`, `m = 1 … s − 1`).
+    pub(crate) lift: Vec<f64>,
+    /// The Lagrange basis of the step's quadrature nodes at the reference's (row `j`: its
+    /// node `j`); empty unless the quadrature nodes are the control points (Lobatto).
+    pub(crate) block_weights: Vec<f64>,
+    /// The Lagrange basis of the step's control points at the reference's control points
+    /// `0 … r − 2` (row `j`): a constrained step's multipliers there.
+    pub(crate) lift_lambda: Vec<f64>,
 }
 
 /// One term of `∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i
@@ -234,6 +253,7 @@ impl Scheme {
                 extrapolation,
                 end_slope,
                 extrapolates: lebesgue <= MAX_PREDICTOR_LEBESGUE,
+                estimate: OnceLock::new(),
             }),
         }
     }
@@ -315,11 +335,43 @@ impl Scheme {
     /// the Lobatto scheme with `p / 2 + 2` control points, of order at least `p + 2` for a
     /// scheme of order `p`. It may have one point more than [`MAX_STAGES`].
     pub(crate) fn error_reference(&self) -> Scheme {
-        let s = self.order() / 2 + 2;
-        let (x, w) = lobatto_nodes_weights(s);
-        Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w)
+        self.estimate_tables().reference.clone()
     }
 
+    /// The error estimate's tables ([`EstimateTables`]), made on the first call.
+    pub(crate) fn estimate_tables(&self) -> &EstimateTables {
+        self.t.estimate.get_or_init(|| {
+            let s = self.order() / 2 + 2;
+            let (x, w) = lobatto_nodes_weights(s);
+            let reference = Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w);
+            let (d, c) = (reference.d(), reference.c());
+            let s1 = self.stages() - 1;
+            let lift = d[1..]
+                .iter()
+                .flat_map(|&dj| (1..=s1).map(move |m| (dj, m)))
+                .map(|(dj, m)| self.basis_at(dj, m))
+                .collect();
+            let block_weights = if self.c() == self.d() {
+                c.iter()
+                    .flat_map(|&cj| (0..=s1).map(move |m| (cj, m)))
+                    .map(|(cj, m)| self.basis_at(cj, m))
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            let lift_lambda = d[..d.len() - 1]
+                .iter()
+                .flat_map(|&dj| (0..=s1).map(move |m| (dj, m)))
+                .map(|(dj, m)| self.basis_at(dj, m))
+                .collect();
+            EstimateTables {
+                reference,
+                lift,
+                block_weights,
+                lift_lambda,
+            }
+        })
+    }
     /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
     #[inline]
     pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {

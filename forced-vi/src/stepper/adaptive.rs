@@ -152,7 +152,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             // Fresh factors take the step's node blocks (see `crate::control`).
             let carried = !fresh && reference.carry_factors(h);
             if !carried && !self.block_weights.is_empty() {
-                reference.seed_node_blocks(&self.backend, &self.block_weights);
+                reference.seed_node_blocks(&self.backend, self.block_weights);
             }
             match reference.solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale) {
                 Ok(rep) => *iters += rep.iterations,

@@ -141,12 +141,12 @@ pub struct Stepper<'a, M, const N: usize> {
     /// `ℓ_m(d'_j)`, the step polynomial at its control points (row `j − 1`, column
     /// `m − 1`).
     reference: Option<Backend<'a, M, N>>,
-    lift: Vec<f64>,
+    lift: &'a [f64],
     /// Adaptive runs of a Lobatto scheme: the Lagrange basis of the step's quadrature nodes
     /// at the reference's (row `j`: its node `j`), which interpolates the step's node blocks
     /// into the reference's Jacobian (see [`crate::control`]); empty where the reference
     /// evaluates its own.
-    block_weights: Vec<f64>,
+    block_weights: &'a [f64],
     /// Adaptive runs: the accumulated round-off, squared, in the tolerance's norm (see
     /// [`crate::control`]).
     round_off_sq: f64,
@@ -184,7 +184,7 @@ pub struct Stepper<'a, M, const N: usize> {
     tangent: Option<Box<tangent::Tangent>>,
     /// A constrained model: the step's multipliers interpolated to the reference's control
     /// points `0 … r − 2` (row `j`: the Lagrange basis of the step's control points there).
-    lift_lambda: Vec<f64>,
+    lift_lambda: &'a [f64],
     /// A constrained model: the mean constraint force over the last step (DESIGN §11).
     cforce: Vec<f64>,
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).

@@ -51,33 +51,17 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         } = setup;
         check_run(&options, t_final)?;
         options.check_step_bounds()?;
-        // The step polynomial at the error reference's control points.
-        let mut lift = Vec::new();
-        if let Some(r) = &reference {
-            let s1 = scheme.stages() - 1;
-            let d = r.scheme().d();
-            for &dj in &d[1..] {
-                lift.extend((1..=s1).map(|m| scheme.basis_at(dj, m)));
-            }
-        }
-        // The step's node blocks at the reference's quadrature nodes: a Lobatto scheme's
-        // quadrature nodes are its control points, so the same basis interpolates them.
-        let mut block_weights = Vec::new();
-        if let Some(r) = &reference {
-            if scheme.c() == scheme.d() && model.constraint_count() == 0 {
-                for &cj in r.scheme().c() {
-                    block_weights.extend((0..scheme.stages()).map(|m| scheme.basis_at(cj, m)));
-                }
-            }
-        }
-        // The step's multipliers (at all its control points) at the reference's.
-        let mut lift_lambda = Vec::new();
-        if let Some(r) = &reference {
-            if model.constraint_count() > 0 {
-                let d = r.scheme().d();
-                for &dj in &d[..d.len() - 1] {
-                    lift_lambda.extend((0..scheme.stages()).map(|m| scheme.basis_at(dj, m)));
-                }
+        // The step polynomial (and its node blocks, or a constrained step's multipliers)
+        // at the error reference's points: tables of the scheme, made once.
+        let (mut lift, mut block_weights, mut lift_lambda): (&[f64], &[f64], &[f64]) =
+            (&[], &[], &[]);
+        if reference.is_some() {
+            let e = scheme.estimate_tables();
+            lift = &e.lift;
+            if model.constraint_count() == 0 {
+                block_weights = &e.block_weights;
+            } else {
+                lift_lambda = &e.lift_lambda;
             }
         }
         let n_steps = match tolerance {
