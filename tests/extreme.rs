@@ -274,3 +274,64 @@ fn extreme_very_stiff_steps_converge_at_round_off() {
         );
     }
 }
+
+/// Two damped springs about equilibria far from the origin (`c = 1e6`): the forces, of
+/// size 1e-3, are differences of positions of size 1e6, each rounded at about 1e-10.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = (x_dot * x_dot + y_dot * y_dot) / 2
+        - k * ((x - c) * (x - c) + (y - c) * (y - c) + (y - x) * (y - x)) / 2,
+    force(x = -d * x_dot, y = -d * y_dot),
+)]
+pub struct FarSprings {
+    pub k: f64,
+    pub c: f64,
+    pub d: f64,
+}
+
+#[test]
+fn extreme_far_positions_converge_at_round_off() {
+    // Newton's round-off floor must count the forces' round-off at positions of size |q|,
+    // which the increments do not show: with it counted only from the increments and the
+    // forces, these steps (like the 1024-site FPU chain's first step at h = T/64 on the
+    // sparse backend) were refused as diverging, with the residual at 1e-10.
+    let (c, u0) = (1e6, [1e-3, -2e-3]);
+    let far = FarSprings { k: 1.0, c, d: 0.1 };
+    let near = FarSprings { c: 0.0, ..far };
+    for s in 2..=5 {
+        for h in [0.5, 0.2, 0.1] {
+            let end = |m: &FarSprings| {
+                let q = [m.c + u0[0], m.c + u0[1]];
+                Integrator::new(m, Scheme::lobatto(s).unwrap(), h)
+                    .unwrap()
+                    .final_state(InitialState::from_velocity(q, [0.0; 2]), 5.0)
+                    .unwrap_or_else(|f| panic!("lobatto{s}, h = {h}, c = {}: {}", m.c, f.error))
+            };
+            let (a, b) = (end(&far), end(&near));
+            // The same motion, up to the round-off of positions of size 1e6 (2e-10 each).
+            for i in 0..2 {
+                let du = (a.q[i] - c) - b.q[i];
+                assert!(
+                    du.abs() < 1e-8,
+                    "lobatto{s}, h = {h}: displacement {i} off by {du:e}"
+                );
+            }
+        }
+    }
+    // The sparse backend: the FPU chain at n = 1024, four steps of T/64.
+    let chain = forced_vi_models::large::FpuChain::<1024>::default();
+    let integ = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 100.0 / 64.0).unwrap();
+    assert_eq!(
+        integ
+            .path_for(&forced_vi_models::large::FpuChain::<1024>::initial())
+            .unwrap(),
+        forced_vi::LinearPath::Sparse
+    );
+    let end = integ
+        .final_state(
+            forced_vi_models::large::FpuChain::<1024>::initial(),
+            4.0 * 100.0 / 64.0,
+        )
+        .unwrap_or_else(|f| panic!("fpu_chain 1024: {}", f.error));
+    assert_eq!(end.stats.steps, 4);
+}

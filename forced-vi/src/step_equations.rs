@@ -38,6 +38,8 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     /// error estimate of [`crate::control`]): the Jacobian is assembled from them without
     /// evaluating the node kernels.
     pub(crate) blocks_given: bool,
+    /// `h |A| |x|` at the last Jacobian ([`NonlinearSystem::residual_noise`]).
+    pub(crate) noise: f64,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
@@ -116,6 +118,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 None => self.jacs.push(nj),
             }
         }
+        // The forces' round-off at positions of size |x|: `h |A| |x|`.
+        let a_max = self
+            .jacs
+            .iter()
+            .flat_map(|nj| nj.a.iter())
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        let x_max = self
+            .xs
+            .iter()
+            .flat_map(|x| x.iter())
+            .fold(self.q0.amax(), |m, x| m.max(x.abs()));
+        self.noise = h * a_max * x_max;
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {
@@ -166,6 +180,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             self.constraint_rows(z, &mut scratch, Some(jac))?;
         }
         Ok(())
+    }
+
+    fn residual_noise(&self) -> f64 {
+        self.noise
     }
 }
 

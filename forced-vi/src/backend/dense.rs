@@ -59,6 +59,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 gval: vec![0.0; cons],
                 gjac: vec![DMatrix::zeros(cons, N); s],
                 blocks_given: false,
+                noise: 0.0,
             },
             impulse: Vec::new(),
             mu: vec![0.0; cons],

@@ -70,6 +70,9 @@ pub(crate) trait LinearSolver<S: ?Sized> {
     fn refresh(&mut self, sys: &mut S, z: &Self::Vector) -> Result<f64, NewtonFailure>;
     /// Solves `J x = b` in place with the last factors.
     fn solve_in_place(&mut self, b: &mut Self::Vector);
+    /// The round-off of `sys`'s residual that does not shrink with `z` (see
+    /// [`super::NonlinearSystem::residual_noise`]), as of its last Jacobian.
+    fn residual_noise(sys: &S) -> f64;
 }
 
 /// The state and buffers of the iteration, made once.
@@ -190,6 +193,9 @@ impl<V: Buffer> Iteration<V> {
         let scale = residual_scale.max(f64::MIN_POSITIVE);
         let res_tol = o.residual_tol * scale;
         let mut jac_scale = 0.0f64;
+        // The residual's round-off that does not shrink with `z` (the forces' at the
+        // positions), as of the last Jacobian.
+        let mut noise = L::residual_noise(sys);
         L::residual(sys, z, &mut self.r)?;
         let mut rnorm = max_norm(self.r.entries());
         if !rnorm.is_finite() {
@@ -211,11 +217,12 @@ impl<V: Buffer> Iteration<V> {
             self.last_iterations = it;
             if carried.is_none() && !(o.simplified && self.have_factors) {
                 jac_scale = lin.refresh(sys, z)?;
+                noise = L::residual_noise(sys);
                 self.have_factors = true;
                 self.factors_h = self.step_h;
             }
             // Below this level residuals at the current iterate are round-off.
-            let res_floor = round_off_floor(scale, jac_scale, max_norm(z.entries()));
+            let res_floor = round_off_floor(scale + noise, jac_scale, max_norm(z.entries()));
             let mut full = self.direction(lin)?;
             if let Some(ratio) = carried {
                 self.dz.entries_mut().iter_mut().for_each(|x| *x *= ratio);
@@ -280,7 +287,7 @@ impl<V: Buffer> Iteration<V> {
             rnorm = trial_norm;
             prev_step = step;
             let znorm = max_norm(z.entries());
-            let floor = round_off_floor(scale, jac_scale, znorm);
+            let floor = round_off_floor(scale + noise, jac_scale, znorm);
             // A residual at the round-off floor cannot be reduced further: the iterate is as
             // exact as the problem's conditioning allows, even if the increments are noise.
             let at_floor = it > 1 && rnorm <= floor;

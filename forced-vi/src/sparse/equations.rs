@@ -56,6 +56,8 @@ pub(crate) struct SparseStep<'a> {
     pub(crate) cons: Option<StepConstraints>,
     /// Scratch: the multipliers of one control point.
     lam: Vec<f64>,
+    /// `h |A| |x|` at the last Jacobian ([`SparseSystem::residual_noise`]).
+    noise: f64,
 }
 
 impl<'a> SparseStep<'a> {
@@ -89,6 +91,7 @@ impl<'a> SparseStep<'a> {
             outside: false,
             cons,
             lam,
+            noise: 0.0,
         }
     }
 
@@ -240,6 +243,18 @@ impl SparseSystem for SparseStep<'_> {
         self.nodes(z);
         self.eval_nodes(true)?;
         let (h, s1) = (self.h, self.scheme.stages() - 1);
+        // The forces' round-off at positions of size |x|: `h |A| |x|`.
+        let a_max = self
+            .blocks
+            .iter()
+            .flat_map(|b| b.a.iter())
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        let x_max = self
+            .xs
+            .iter()
+            .chain(&self.q0)
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        self.noise = h * a_max * x_max;
         let base = &self.step_pattern.base;
         values.fill(0.0);
         for t in self.scheme.jacobian_terms() {
@@ -266,5 +281,9 @@ impl SparseSystem for SparseStep<'_> {
             }
         }
         Ok(())
+    }
+
+    fn residual_noise(&self) -> f64 {
+        self.noise
     }
 }

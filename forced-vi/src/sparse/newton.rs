@@ -15,6 +15,10 @@ pub(crate) trait SparseSystem {
     fn residual(&mut self, z: &[f64], r: &mut [f64]) -> Result<(), NewtonFailure>;
     /// The Jacobian's values at `z`, on the pattern the solver was made with.
     fn jacobian(&mut self, z: &[f64], values: &mut [f64]) -> Result<(), NewtonFailure>;
+    /// As [`crate::NonlinearSystem::residual_noise`] (default 0).
+    fn residual_noise(&self) -> f64 {
+        0.0
+    }
 }
 
 impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
@@ -36,6 +40,11 @@ impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
     #[inline(always)]
     fn solve_in_place(&mut self, b: &mut Vec<f64>) {
         SparseLu::solve_in_place(self, b);
+    }
+
+    #[inline(always)]
+    fn residual_noise(sys: &S) -> f64 {
+        sys.residual_noise()
     }
 }
 
