@@ -118,18 +118,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 None => self.jacs.push(nj),
             }
         }
-        // The forces' round-off at positions of size |x|: `h |A| |x|`.
-        let a_max = self
-            .jacs
-            .iter()
-            .flat_map(|nj| nj.a.iter())
-            .fold(0.0f64, |m, x| m.max(x.abs()));
-        let x_max = self
-            .xs
-            .iter()
-            .flat_map(|x| x.iter())
-            .fold(self.q0.amax(), |m, x| m.max(x.abs()));
-        self.noise = h * a_max * x_max;
+        self.noise = crate::newton::force_round_off(
+            h,
+            self.jacs.iter().flat_map(|nj| nj.a.iter()),
+            self.xs.iter().flat_map(|x| x.iter()).chain(self.q0.iter()),
+        );
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {

@@ -46,6 +46,20 @@ pub trait NonlinearSystem {
     }
 }
 
+/// `h |A| |x|`, the [`NonlinearSystem::residual_noise`] of a step's equations: the forces'
+/// round-off at positions of size `|x|`, from the entries of `A = ∂(L_q + F)/∂q` at the
+/// step's nodes and the positions there.
+pub(crate) fn force_round_off<'a>(
+    h: f64,
+    a: impl IntoIterator<Item = &'a f64>,
+    x: impl IntoIterator<Item = &'a f64>,
+) -> f64 {
+    fn max_abs<'a>(v: impl IntoIterator<Item = &'a f64>) -> f64 {
+        v.into_iter().fold(0.0f64, |m, x| m.max(x.abs()))
+    }
+    h * max_abs(a) * max_abs(x)
+}
+
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]

@@ -243,18 +243,11 @@ impl SparseSystem for SparseStep<'_> {
         self.nodes(z);
         self.eval_nodes(true)?;
         let (h, s1) = (self.h, self.scheme.stages() - 1);
-        // The forces' round-off at positions of size |x|: `h |A| |x|`.
-        let a_max = self
-            .blocks
-            .iter()
-            .flat_map(|b| b.a.iter())
-            .fold(0.0f64, |m, x| m.max(x.abs()));
-        let x_max = self
-            .xs
-            .iter()
-            .chain(&self.q0)
-            .fold(0.0f64, |m, x| m.max(x.abs()));
-        self.noise = h * a_max * x_max;
+        self.noise = crate::newton::force_round_off(
+            h,
+            self.blocks.iter().flat_map(|b| b.a.iter()),
+            self.xs.iter().chain(&self.q0),
+        );
         let base = &self.step_pattern.base;
         values.fill(0.0);
         for t in self.scheme.jacobian_terms() {
