@@ -310,12 +310,19 @@ and BDF reaches the same errors (1e-2 to 1e-6) about 7·10³ to 10⁴ times fast
 errors (≈ 1e-9 with lobatto4 at h = 1e-4, 2·10⁷ steps) that BDF does not reach at any \
 tolerance it accepts.\n\
 - **Hairer's scaled form with μ = 10⁶ is out of reach.** No variational run finishes with a \
-useful answer: lobatto2 finishes every run with a wrong state, the others stop with Newton \
-failures. Many of those failures (midpoint at every h, lobatto3/4 at small h) report a final \
-residual of 1e-13 to 1e-17, i.e. converged to round-off: the runtime's convergence test is \
-stricter than the round-off of these steps (the momentum scale is ~10⁻⁶ while the Jacobian \
-is ~μh), so subdivision cannot help. BDF succeeds at tol ≤ 1e-5 and ESDIRK34 only at \
-tol ≤ 1e-8.\n\
+useful answer. With fixed steps, lobatto2 finishes every run with an error of 0.16 to 16 in x \
+(whose amplitude is 2); lobatto3, lobatto4 and the midpoint rule stop with \
+`newton_max_iterations` at the first relaxation jump (from h = 0.2 down, their steps done \
+times h is about 0.8, the jump's τ), where even 64 substeps are 10⁶ to 10¹⁰ times the jump's \
+time scale (about 1/μ in t): these Newton solves do not converge (final residuals from 0.1 to 1e23, checked at \
+h = 0.1 to 1e-4). The adaptive runs end in `step_size_too_small` (or the Newton failure of \
+their last attempt) for another reason: error control per unit step (see Adaptive runs) gives \
+a step of size h the budget tol·h/T of the local error, and here T = 2·10⁶ in t while the \
+initial layer (from x' = 0, off the slow manifold) and the jump need h ≈ 10⁻⁸: a budget of \
+10⁻¹⁵ relative or less, the round-off of the state. The steps shrink until they reach the \
+floor 16ε·t (3·10⁻⁹ at the jump's t ≈ 8·10⁵); traced on lobatto4 at tol 1e-1: 1771 steps, \
+through the jump at h ≈ 1.2·10⁻⁸, then `step_size_too_small` at t = 806852.8. BDF succeeds \
+at tol ≤ 1e-5 and ESDIRK34 only at tol ≤ 1e-8.\n\
 - **Mildly stiff problems are a draw.** On the over-damped oscillator (ζ = 100, hλ up to 200) \
 and on the coupled van der Pol with amplitudes ×100 every run is `ok` at every h from 1 to \
 5e-5, and the cheapest run to a given error is within a factor of about 3 of the stiff \
