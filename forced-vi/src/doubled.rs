@@ -8,10 +8,10 @@
 //! minus × plus second derivative is `[[A, B], [C, E]]`.
 
 use nalgebra::{SMatrix, SVector};
-use num_dual::{partial_hessian, HyperDualSVec64};
+use num_dual::{HyperDualSVec64, partial_hessian};
 
 use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
-use crate::scalar::{lift, Scalar};
+use crate::scalar::{Scalar, lift};
 
 /// The doubled Lagrangian `Λ(q, v, Q, V)` of an autonomous model (at `t = 0` for a driven
 /// one; see [`doubled_lagrangian_at`]).

@@ -34,8 +34,8 @@
 //! ```
 
 use crate::initial::InitialState;
-use crate::integrator::output::{self, Output};
 use crate::integrator::Integrator;
+use crate::integrator::output::{self, Output};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::{FinalState, RunFailure, Trajectory};
 

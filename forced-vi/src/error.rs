@@ -131,7 +131,9 @@ pub enum Error {
     /// [`crate::LinearPath::DENSE_MAX_DOF`], or node kernels that need more stack than
     /// [`crate::MAX_KERNEL_STACK`]. A model with sparse kernels runs on the sparse backend
     /// instead ([`crate::LinearPath::Auto`] or [`crate::LinearPath::Sparse`]).
-    #[error("the model is too large for the dense path: {dof} coordinates (at most {max_dof}), node kernels needing {stack_bytes} bytes of stack (at most {max}); give it sparse kernels (a model `#[forced_lagrangian]` can split into local terms) and use LinearPath::Auto or Sparse")]
+    #[error(
+        "the model is too large for the dense path: {dof} coordinates (at most {max_dof}), node kernels needing {stack_bytes} bytes of stack (at most {max}); give it sparse kernels (a model `#[forced_lagrangian]` can split into local terms) and use LinearPath::Auto or Sparse"
+    )]
     ModelTooLarge {
         /// The model's coordinates `N`.
         dof: usize,
@@ -143,7 +145,9 @@ pub enum Error {
         max: usize,
     },
     /// A tolerance is negative, not finite, or zero together with its partner.
-    #[error("tolerance of coordinate {index} is invalid (rtol = {rtol}, atol = {atol}): both must be finite and non-negative, not both zero")]
+    #[error(
+        "tolerance of coordinate {index} is invalid (rtol = {rtol}, atol = {atol}): both must be finite and non-negative, not both zero"
+    )]
     InvalidTolerance {
         /// The coordinate.
         index: usize,
@@ -154,7 +158,9 @@ pub enum Error {
     },
     /// The step bounds of an adaptive run are not `0 ≤ min_step ≤ max_step`, with
     /// `min_step` finite and `max_step` positive.
-    #[error("step bounds min_step = {min_step}, max_step = {max_step} must satisfy 0 <= min_step <= max_step, min_step finite and max_step positive")]
+    #[error(
+        "step bounds min_step = {min_step}, max_step = {max_step} must satisfy 0 <= min_step <= max_step, min_step finite and max_step positive"
+    )]
     InvalidStepBounds {
         /// The smallest step.
         min_step: f64,
@@ -175,7 +181,9 @@ pub enum Error {
     /// tolerance's weighted norm), would pass three times the tolerance: the run stops
     /// before that step, so that no `Ok` claims an accuracy the arithmetic cannot give (see
     /// [`crate::control`]). Fewer steps (more stages) or a looser tolerance get further.
-    #[error("the round-off of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: the tolerance is too close to f64 round-off for this run; loosen it or use more stages")]
+    #[error(
+        "the round-off of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: the tolerance is too close to f64 round-off for this run; loosen it or use more stages"
+    )]
     ToleranceBelowRoundOff {
         /// Where the run stopped.
         t: f64,
@@ -193,7 +201,9 @@ pub enum Error {
         steps: usize,
     },
     /// Initial data off the constraint manifold of a constrained model (DESIGN §11).
-    #[error("the initial {what} violates the constraints: residual {residual:.3e} (at most {tol:.1e}); InitialState::projected makes it consistent")]
+    #[error(
+        "the initial {what} violates the constraints: residual {residual:.3e} (at most {tol:.1e}); InitialState::projected makes it consistent"
+    )]
     InconsistentInitialState {
         /// `"position"` (`g(q_0) ≠ 0`) or `"velocity"` (`G(q_0) v_0 ≠ 0`).
         what: &'static str,
@@ -220,7 +230,9 @@ pub enum Error {
         index: usize,
     },
     /// The mass matrix `∂²L/∂v²` is singular or nearly so: `L` is degenerate there.
-    #[error("mass matrix is singular or nearly so at step {step}, t = {t} (reciprocal condition {rcond:.3e})")]
+    #[error(
+        "mass matrix is singular or nearly so at step {step}, t = {t} (reciprocal condition {rcond:.3e})"
+    )]
     SingularMassMatrix {
         /// The step (0 for the initial data).
         step: usize,
@@ -264,7 +276,9 @@ pub enum Error {
     /// is singular or not smooth there, the usual cause is a step beyond the scheme's
     /// stability limit for the model's fastest mode (about `h ω ≤ 2` for `lobatto2`,
     /// larger with more stages): the message says so.
-    #[error("newton failed at step {step}, t = {t}: {failure} (a smaller step, tolerances or more stages may help: a step beyond the scheme's stability limit for the model's fastest mode does not converge)")]
+    #[error(
+        "newton failed at step {step}, t = {t}: {failure} (a smaller step, tolerances or more stages may help: a step beyond the scheme's stability limit for the model's fastest mode does not converge)"
+    )]
     NewtonFailed {
         /// The step being computed (1-based: step k goes from t_{k−1} to t_k).
         step: usize,
@@ -284,7 +298,9 @@ pub enum Error {
     },
     /// [`crate::LinearPath::Sparse`] was asked for on a model whose node pattern is too
     /// dense for sparse storage to pay (see [`crate::LinearPath::SPARSE_FORCED_MAX_DENSITY`]).
-    #[error("the sparse backend refuses a node pattern with {nnz} entries for {n} coordinates: fill {fill:.2} of n², more than {max}")]
+    #[error(
+        "the sparse backend refuses a node pattern with {nnz} entries for {n} coordinates: fill {fill:.2} of n², more than {max}"
+    )]
     PatternTooDense {
         /// Stored entries of the node pattern.
         nnz: usize,

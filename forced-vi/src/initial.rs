@@ -152,12 +152,12 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
         let mut lambda = 1.0;
         loop {
             let trial = v + dv * lambda;
-            if let Some(rt) = residual_at(&trial).filter(|_| all_finite(&trial)) {
-                if rt.amax() < r.amax() * (1.0 - 1e-4 * lambda) {
-                    v = trial;
-                    r = rt;
-                    break;
-                }
+            if let Some(rt) = residual_at(&trial).filter(|_| all_finite(&trial))
+                && rt.amax() < r.amax() * (1.0 - 1e-4 * lambda)
+            {
+                v = trial;
+                r = rt;
+                break;
             }
             lambda *= 0.5;
             if lambda < 1e-10 {

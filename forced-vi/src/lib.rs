@@ -98,10 +98,10 @@ pub mod trajectory;
 pub use control::Tolerance;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
-pub use integrator::{output, Integrator, LinearPath, StepOptions, MAX_KERNEL_STACK};
+pub use integrator::{Integrator, LinearPath, MAX_KERNEL_STACK, StepOptions, output};
 pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
-pub use scalar::{lift, Scalar};
+pub use scalar::{Scalar, lift};
 pub use scheme::{Scheme, SchemeId};
 pub use stepper::Stepper;
 pub use trajectory::{
@@ -116,8 +116,8 @@ pub use forced_vi_macros::forced_lagrangian;
 /// The names most programs need.
 pub mod prelude {
     pub use crate::{
-        forced_lagrangian, output, FinalState, ForcedLagrangian, InitialState, Integrator, Scalar,
-        Scheme, SchemeId, StepRecord, Tolerance, Trajectory,
+        FinalState, ForcedLagrangian, InitialState, Integrator, Scalar, Scheme, SchemeId,
+        StepRecord, Tolerance, Trajectory, forced_lagrangian, output,
     };
 }
 

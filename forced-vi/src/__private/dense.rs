@@ -3,11 +3,11 @@
 //! that the term uses, and adds the result to the node blocks.
 
 use nalgebra::{SMatrix, SVector};
-use num_dual::{gradient, hessian, jacobian, partial_hessian};
 use num_dual::{Dual2SVec64, DualSVec64, HyperDualSVec64};
+use num_dual::{gradient, hessian, jacobian, partial_hessian};
 
 use crate::model::{NodeGradient, NodeJacobian};
-use crate::scalar::{lift, Scalar};
+use crate::scalar::{Scalar, lift};
 
 /// A bound on the stack of one generated kernel helper whose dual number is `T`: arrays of
 /// `N` of them (the lifted `q` and `v` and their copies), `values` more (the model code's
@@ -25,11 +25,7 @@ pub const fn kernel_stack_bytes<T, const N: usize>(values: usize) -> usize {
 
 /// The larger of two sizes (for const expressions).
 pub const fn max_usize(a: usize, b: usize) -> usize {
-    if a > b {
-        a
-    } else {
-        b
-    }
+    if a > b { a } else { b }
 }
 
 /// Zeroed gradient blocks.

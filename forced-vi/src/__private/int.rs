@@ -67,7 +67,9 @@ macro_rules! impl_int {
         }
     )*};
 }
-impl_int!(u8, u16, u32, u64, u128, usize, i8, i16, i32, i64, i128, isize);
+impl_int!(
+    u8, u16, u32, u64, u128, usize, i8, i16, i32, i64, i128, isize
+);
 
 /// `a + b` in model code.
 #[inline(always)]

@@ -23,8 +23,8 @@ pub use nalgebra;
 pub use num_dual;
 
 pub use crate::doubled;
-pub use crate::model::{general, ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
-pub use crate::scalar::{lift, Scalar};
+pub use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure, general};
+pub use crate::scalar::{Scalar, lift};
 pub use core::primitive::f64;
 pub use nalgebra::{SMatrix, SVector};
 

@@ -5,9 +5,9 @@ use nalgebra::{DMatrix, DVector, SVector};
 
 use super::{Layout, StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
-use crate::initial::{mass_check, mass_factor, solve_velocity, MIN_MASS_RCOND};
+use crate::initial::{MIN_MASS_RCOND, mass_check, mass_factor, solve_velocity};
 use crate::model::ForcedLagrangian;
-use crate::newton::{solve_small, DenseLu, Newton, NewtonOptions, NewtonReport};
+use crate::newton::{DenseLu, Newton, NewtonOptions, NewtonReport, solve_small};
 use crate::scalar::all_finite;
 use crate::scheme::Scheme;
 use crate::step_equations::StepProblem;

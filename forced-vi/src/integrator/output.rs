@@ -44,8 +44,8 @@ use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::stepper::Stepper;
 use crate::trajectory::{
-    hermite, AdjointGradient, DenseState, FinalState, RunFailure, RunStats, Sensitivities,
-    StepRecord, Trajectory,
+    AdjointGradient, DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord,
+    Trajectory, hermite,
 };
 
 mod sealed {

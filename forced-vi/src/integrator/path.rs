@@ -2,13 +2,13 @@
 //! sparse one.
 
 use super::Integrator;
+use crate::MAX_KERNEL_STACK;
 use crate::backend::{Backend, DenseBackend};
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
-use crate::MAX_KERNEL_STACK;
 #[cfg(feature = "sparse")]
 use crate::{
     backend::SparseBackend,
@@ -132,7 +132,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             (LinearPath::Sparse, None) => {
                 return Err(Error::NoSparseKernels {
                     reason: "the model has no sparse node kernels",
-                })
+                });
             }
             (LinearPath::Auto, Some(_)) if N < LinearPath::SPARSE_MIN_DOF => return Ok(None),
             (LinearPath::Auto, None) => return Ok(None),
@@ -189,7 +189,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
                     n: N,
                     fill,
                     max: LinearPath::SPARSE_FORCED_MAX_DENSITY,
-                })
+                });
             }
             _ => {}
         }

@@ -2,8 +2,8 @@
 //! [`super::output`], on either backend, through the one [`Stepper`](crate::Stepper). Every
 //! run fails with [`RunFailure`], which keeps what was computed before the failure.
 
-use super::output::{self, Output};
 use super::Integrator;
+use super::output::{self, Output};
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
 use crate::trajectory::{

@@ -9,7 +9,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::scalar::{lift, Scalar};
+use crate::scalar::{Scalar, lift};
 
 mod sparse_node;
 
@@ -301,7 +301,7 @@ pub mod general {
     use super::*;
     use nalgebra::SVector;
     use num_dual::{
-        gradient, hessian, jacobian, partial_hessian, Dual2SVec64, DualSVec64, HyperDualSVec64,
+        Dual2SVec64, DualSVec64, HyperDualSVec64, gradient, hessian, jacobian, partial_hessian,
     };
 
     /// A bound on the stack that [`node_jacobian`] needs: a few arrays of `N` hyper-dual

@@ -525,10 +525,10 @@ impl<M: crate::ForcedLagrangian<N>, const N: usize> SparseNode for DualConstrain
         }
         // The curvature, pair by pair over the coordinates one constraint reads (not asked
         // for without multipliers).
-        if let ConstraintTarget::Jacobian { lambda, .. } = &sink.target {
-            if lambda.is_empty() {
-                return;
-            }
+        if let ConstraintTarget::Jacobian { lambda, .. } = &sink.target
+            && lambda.is_empty()
+        {
+            return;
         }
         let mut pairs: Vec<(usize, usize)> = reads
             .iter()

@@ -23,7 +23,7 @@ use crate::error::NewtonFailure;
 
 pub use iteration::round_off_floor;
 pub(crate) use iteration::{Iteration, LinearSolver};
-pub use lu::{solve_small, DenseLu};
+pub use lu::{DenseLu, solve_small};
 pub use options::NewtonOptions;
 
 /// A square nonlinear system `R(z) = 0`.

@@ -30,7 +30,7 @@
 //! faer's LU is needed.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
+use faer::sparse::linalg::lu::{LuRef, NumericLu, SymbolicLu, factorize_symbolic_lu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
@@ -265,11 +265,7 @@ impl SparseLu {
         }
         let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let error = max(&self.residual) / (max(&self.scale) + 1.0);
-        if error.is_nan() {
-            f64::INFINITY
-        } else {
-            error
-        }
+        if error.is_nan() { f64::INFINITY } else { error }
     }
 
     /// A zero pivot may come through (faer takes one as it comes); the probe finds it (and a

@@ -2,8 +2,8 @@
 //! reference scheme, the controller's decision, and the automatic first step. The estimate
 //! and the controller are derived in [`crate::control`]. The same on every backend.
 
-use super::checks::step_count;
 use super::Stepper;
+use super::checks::step_count;
 use crate::backend::{StepBackend, StepFailure};
 use crate::control::Tolerance;
 use crate::error::{Error, NewtonFailure};

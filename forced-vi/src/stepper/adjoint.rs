@@ -21,10 +21,10 @@
 
 use nalgebra::DVector;
 
-use super::{with_stack, Stepper};
+use super::{Stepper, with_stack};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::Error;
-use crate::model::{general, ForcedLagrangian};
+use crate::model::{ForcedLagrangian, general};
 
 /// The steps of a run, kept for its adjoint.
 pub(crate) struct Tape {

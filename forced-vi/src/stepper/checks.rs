@@ -4,7 +4,7 @@
 use super::StepOptions;
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
-use crate::trajectory::{non_finite_field, StepRecord};
+use crate::trajectory::{StepRecord, non_finite_field};
 
 /// Refuses a final time that is negative or not finite, and invalid Newton options.
 pub(crate) fn check_run(options: &StepOptions, t_final: f64) -> Result<(), Error> {

@@ -33,7 +33,7 @@ use crate::error::Error;
 use crate::model::{ForcedLagrangian, NodeJacobian};
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
-use crate::trajectory::{energy, non_finite_field, RunFailure, RunStats, StepRecord};
+use crate::trajectory::{RunFailure, RunStats, StepRecord, energy, non_finite_field};
 
 use state::State;
 

@@ -3,13 +3,13 @@
 
 use super::checks::{check_finite, check_run, check_time_flag, non_finite, step_count};
 use super::state::State;
-use super::{step_stack_bytes, with_stack, RunSetup, Stepper};
+use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
 use crate::backend::{Backend, StepBackend};
 use crate::control::Controller;
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
-use crate::trajectory::{energy, RunStats};
+use crate::trajectory::{RunStats, energy};
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
     /// Checks the run and its initial data and makes the stepper at the initial state, on

@@ -20,10 +20,10 @@
 
 use nalgebra::{DMatrix, SVector};
 
-use super::{with_stack, Stepper};
+use super::{Stepper, with_stack};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
-use crate::model::{general, ForcedLagrangian, NodeGradient};
+use crate::model::{ForcedLagrangian, NodeGradient, general};
 use crate::scalar::all_finite;
 
 /// The tangent `∂(q_k, p_k)/∂(seed)` of a run and its scratch, made once per run.
