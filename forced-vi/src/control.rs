@@ -106,7 +106,14 @@
 //! **The controller.** A PI controller (Gustafsson; Hairer & Wanner, IV.2) on
 //! `‖e‖ ∝ h^p` (per unit step): `h_new = h · clamp(0.9 ‖e‖^{−0.7/p} ‖e_prev‖^{0.4/p}, 0.2,
 //! 5)`, with no growth right after a rejection, within
-//! [`StepOptions::max_step`](crate::StepOptions::max_step).
+//! [`StepOptions::max_step`](crate::StepOptions::max_step). A rejected step is retried
+//! at `h · clamp(0.9 ‖e‖^{−1/p}, 0.2, 1)`, except after a rejection whose error was less
+//! than twice this one: there the estimate does not fall like `h^p` (a stiff model's fast
+//! mode turning, before a relaxation jump), and the retry takes the floor factor 0.2 at
+//! once. Measured on the stiff van der Pol (μ = 10³, T = 2000, tol 1e-1 to 1e-5): lobatto3
+//! rejected 316 to 635 steps instead of 639 to 1755 at the three loosest tolerances, and
+//! lobatto4..6 19 to 50 % fewer at the loosest, with accepted steps within 13 % and final
+//! errors at most 1.6e-7 (2.0e-7 before).
 //!
 //! **The first step** ([`crate::Integrator::adaptive`]): Hairer, Nørsett & Wanner's
 //! algorithm (*Solving ODEs I*, II.4) on `y = (q, p)`, `f = (v, L_q + F)`:
@@ -197,6 +204,8 @@ pub(crate) struct Controller {
     order: f64,
     err_prev: f64,
     rejected: bool,
+    /// The error of the last rejected step, while rejections follow each other.
+    err_rejected: f64,
 }
 
 impl Controller {
@@ -209,6 +218,7 @@ impl Controller {
             order: order.max(1) as f64,
             err_prev: 1.0,
             rejected: false,
+            err_rejected: f64::INFINITY,
         }
     }
 
@@ -222,18 +232,27 @@ impl Controller {
         }
         self.err_prev = err;
         self.rejected = false;
+        self.err_rejected = f64::INFINITY;
         h * fac.clamp(Self::MIN_FACTOR, Self::MAX_FACTOR)
     }
 
     /// The retry after rejecting a step `h` with error `err > 1` (or a failed solve, with
-    /// `err = ∞`).
+    /// `err = ∞`): from `‖e‖ ∝ h^p`, or by the smallest factor when the rejection follows
+    /// another whose error was less than twice this one.
     pub(crate) fn reject(&mut self, h: f64, err: f64) -> f64 {
+        let again = self.rejected;
         self.rejected = true;
-        let fac = if err.is_finite() {
-            Self::SAFETY * err.powf(-1.0 / self.order)
-        } else {
+        let fac = if !err.is_finite() {
             0.25
+        } else if again && err >= 0.5 * self.err_rejected {
+            // The step shrank and its error did not fall by half: the estimate is outside
+            // its asymptotic range (it need not fall like `h^p` there), and the prediction
+            // from it would back off one small factor at a time.
+            Self::MIN_FACTOR
+        } else {
+            Self::SAFETY * err.powf(-1.0 / self.order)
         };
+        self.err_rejected = err;
         h * fac.clamp(Self::MIN_FACTOR, 1.0)
     }
 }
@@ -288,5 +307,26 @@ mod tests {
         assert!(c.accept(1.0, 1e-6) <= 1.0);
         assert!(c.accept(1.0, 1e-12) <= 5.0);
         assert_eq!(c.reject(1.0, f64::INFINITY), 0.25);
+    }
+
+    #[test]
+    fn controller_takes_the_floor_factor_when_rejections_stop_reducing_the_error() {
+        let mut c = Controller::new(4);
+        // A first rejection follows `‖e‖ ∝ h^p`: 0.9 · 16^{−1/4} = 0.45.
+        let h1 = c.reject(1.0, 16.0);
+        assert!((h1 - 0.45).abs() < 1e-12, "{h1}");
+        // The next one, whose error fell by less than half, backs off by the floor factor.
+        assert_eq!(c.reject(h1, 9.0), 0.2 * h1);
+        // One that fell by more than half follows the prediction again.
+        let h3 = c.reject(1.0, 2.0);
+        assert!((h3 - 0.9 * 2f64.powf(-0.25)).abs() < 1e-12, "{h3}");
+        // An accepted step ends the run of rejections.
+        c.accept(1.0, 0.5);
+        let h4 = c.reject(1.0, 16.0);
+        assert!((h4 - 0.45).abs() < 1e-12, "{h4}");
+        // After a failed solve (an infinite error) a finite one follows the prediction.
+        c.reject(1.0, f64::INFINITY);
+        let h5 = c.reject(1.0, 16.0);
+        assert!((h5 - 0.45).abs() < 1e-12, "{h5}");
     }
 }
