@@ -120,8 +120,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         }
         self.noise = crate::newton::force_round_off(
             h,
-            self.jacs.iter().flat_map(|nj| nj.a.iter()),
-            self.xs.iter().flat_map(|x| x.iter()).chain(self.q0.iter()),
+            self.jacs.iter().map(|nj| nj.a.as_slice()),
+            self.xs
+                .iter()
+                .map(|x| x.as_slice())
+                .chain([self.q0.as_slice()]),
         );
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();

@@ -101,12 +101,14 @@ pub(crate) struct Iteration<V> {
 
 /// Max-norm that propagates NaN (unlike `f64::max`).
 fn max_norm(x: &[f64]) -> f64 {
-    let mut m = 0.0f64;
+    // The maximum and the NaN test in separate accumulators, without a branch on either.
+    let (mut m, mut nan) = (0.0f64, false);
     for &v in x {
         let a = v.abs();
-        m = if a > m || a.is_nan() { a } else { m };
+        m = if a > m { a } else { m };
+        nan |= a.is_nan();
     }
-    m
+    if nan { f64::NAN } else { m }
 }
 
 /// The round-off level of a residual whose terms, of size `scale` and `|J| · |z|`, cancel.

@@ -245,8 +245,8 @@ impl SparseSystem for SparseStep<'_> {
         let (h, s1) = (self.h, self.scheme.stages() - 1);
         self.noise = crate::newton::force_round_off(
             h,
-            self.blocks.iter().flat_map(|b| b.a.iter()),
-            self.xs.iter().chain(&self.q0),
+            self.blocks.iter().map(|b| b.a.as_slice()),
+            [self.xs.as_slice(), self.q0.as_slice()],
         );
         let base = &self.step_pattern.base;
         values.fill(0.0);
