@@ -167,8 +167,9 @@ fn extreme_mass_becomes_singular_mid_run() {
         .all(|r| r.q[0].abs() < 0.5 && r.energy.is_finite()));
 }
 
-/// A force that is NaN for `q > 1`.
-struct SqrtDrag;
+/// A force that is NaN for `q > 1`. Also used by `trust_runtime` (one model type, one
+/// instantiation of the runtime in the test binary).
+pub(crate) struct SqrtDrag;
 
 impl ForcedLagrangian<1> for SqrtDrag {
     fn lagrangian<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> D {

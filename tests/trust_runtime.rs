@@ -455,17 +455,8 @@ fn trust_bad_newton_options_are_typed_errors() {
     }
 }
 
-/// A force that is NaN for `q > 1`.
-struct SqrtDrag;
-
-impl ForcedLagrangian<1> for SqrtDrag {
-    fn lagrangian<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> D {
-        v[0] * v[0] * 0.5
-    }
-    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
-        [-v[0] * (-q[0] + 1.0).sqrt() * 0.1]
-    }
-}
+// A force that is NaN for `q > 1`: the model of `extreme`'s NaN-mid-run test.
+use crate::extreme::SqrtDrag;
 
 #[test]
 fn trust_streaming_failure_keeps_its_stats() {
