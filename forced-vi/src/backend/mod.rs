@@ -230,11 +230,38 @@ pub(crate) enum Backend<'a, M, const N: usize> {
     Sparse(Box<SparseBackend<'a>>),
 }
 
-/// Forwards a call to the backend in use.
+/// Whether an `N × N` block takes more than 64 KiB: a dense backend's call may then hold
+/// several on its frame.
+const fn dense_frame_is_large<const N: usize>() -> bool {
+    N.saturating_mul(N)
+        .saturating_mul(std::mem::size_of::<f64>())
+        > 64 * 1024
+}
+
+/// Runs `f` in a frame of its own. A dense call of a large model (its mass matrix, its node
+/// blocks: megabytes at `N` = 1024) inlined into the code shared with the sparse backend
+/// would put those blocks on that code's frame, which the sparse path's stack budget
+/// (`crate::stepper::step_stack_bytes`) does not count; whether LLVM inlines it changes
+/// with unrelated code (measured: a 1024-coordinate constrained chain on the sparse backend
+/// overflowed its stack in `initial_state` after an edit elsewhere in the stepper, an
+/// adaptive step-size rule).
+#[inline(never)]
+fn out_of_line<R>(f: impl FnOnce() -> R) -> R {
+    f()
+}
+
+/// Forwards a call to the backend in use; for a large model, the dense backend's out of
+/// line ([`out_of_line`]).
 macro_rules! forward {
     ($self:ident, $b:ident => $e:expr) => {
         match $self {
-            Backend::Dense($b) => $e,
+            Backend::Dense($b) => {
+                if dense_frame_is_large::<N>() {
+                    out_of_line(move || $e)
+                } else {
+                    $e
+                }
+            }
             #[cfg(feature = "sparse")]
             Backend::Sparse($b) => $e,
         }
