@@ -3,7 +3,9 @@
 //! ([`LinearPath::DENSE_MAX_DOF`]), on the main thread and on a thread with the default
 //! 2 MiB stack; one coordinate more is the typed [`Error::ModelTooLarge`] on the dense path
 //! and the sparse backend under `Auto`. The node kernels return `N × N` blocks by value (32
-//! MiB at `N = 1024`), so the stepper runs a step on a stack sized for it.
+//! MiB at `N = 1024`), so the stepper runs a step on a stack sized for it. The same methods on
+//! the sparse backend at `N = 1024`, whose code shares the stepper with the dense one (a dense
+//! call inlined into that shared code once put 8 MiB blocks on its frame).
 //!
 //! A test binary of its own, without libtest's harness, so that the main thread is one of
 //! the threads tested (libtest runs tests on threads of its own):
@@ -23,18 +25,25 @@ fn initial<const N: usize>() -> InitialState<N> {
 }
 
 fn dense<const N: usize>(model: &SpringChain<N>) -> Integrator<'_, SpringChain<N>, N> {
+    on_path(model, LinearPath::Dense)
+}
+
+fn on_path<const N: usize>(
+    model: &SpringChain<N>,
+    path: LinearPath,
+) -> Integrator<'_, SpringChain<N>, N> {
     // lobatto2 at the largest N: its LU (N × N) keeps the test to seconds.
     let s = if N > 256 { 2 } else { 3 };
     Integrator::new(model, Scheme::lobatto(s).unwrap(), H)
         .unwrap()
-        .linear_path(LinearPath::Dense)
+        .linear_path(path)
 }
 
 /// The final positions of every run method, which must agree.
-fn every_method<const N: usize>() -> Vec<(&'static str, f64)> {
+fn every_method<const N: usize>(path: LinearPath) -> Vec<(&'static str, f64)> {
     let model = SpringChain::<N>::DEFAULT;
-    let integ = dense(&model);
-    assert_eq!(integ.path_for(&initial()).unwrap(), LinearPath::Dense);
+    let integ = on_path(&model, path);
+    assert_eq!(integ.path_for(&initial()).unwrap(), path);
     let mut out = Vec::new();
     let run = integ.solve(initial(), T, output::Records).unwrap();
     out.push(("run", run.last().unwrap().q[N / 2]));
@@ -46,7 +55,7 @@ fn every_method<const N: usize>() -> Vec<(&'static str, f64)> {
         .unwrap();
     out.push(("for_each_step", last));
     let mut stepper = integ.stepper(initial(), T).unwrap();
-    assert_eq!(stepper.path(), LinearPath::Dense);
+    assert_eq!(stepper.path(), path);
     let end = stepper.by_ref().last().unwrap().unwrap();
     out.push(("stepper", end.q[N / 2]));
     let samples = integ.solve(initial(), T, output::Samples(&[T])).unwrap();
@@ -111,10 +120,13 @@ fn on_both_threads(name: &str, f: fn()) {
 
 fn main() {
     on_both_threads("trust_dense_every_method_at_256", || {
-        every_method::<256>();
+        every_method::<256>(LinearPath::Dense);
     });
     on_both_threads("trust_dense_every_method_at_the_largest_n", || {
-        every_method::<{ LinearPath::DENSE_MAX_DOF }>();
+        every_method::<{ LinearPath::DENSE_MAX_DOF }>(LinearPath::Dense);
+    });
+    on_both_threads("trust_sparse_every_method_at_1024", || {
+        every_method::<1024>(LinearPath::Sparse);
     });
     on_both_threads("trust_dense_model_too_large", too_large_for_dense);
 }
