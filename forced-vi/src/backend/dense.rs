@@ -291,6 +291,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         self.newton.iteration.reject_carry()
     }
 
+    fn set_costly_factors(&mut self, costly: bool) {
+        self.newton.iteration.set_costly_factors(costly)
+    }
+
     #[inline(always)]
     fn node_fq(&self, i: usize) -> &[f64] {
         self.prob.grads[i].fq.as_slice()

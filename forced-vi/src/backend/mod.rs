@@ -131,6 +131,9 @@ pub(crate) trait StepBackend {
     fn carried_error(&self) -> f64;
     /// Refuses the last solve's carried factors: the next solves make fresh ones.
     fn reject_carry(&mut self);
+    /// Marks the model's factors as costly: after carried factors fail, the next solve
+    /// carries again (see the `crate::newton` iteration's `set_costly_factors`).
+    fn set_costly_factors(&mut self, costly: bool);
     /// `L_q + F` at quadrature node `i` of the last residual evaluation.
     fn node_fq(&self, i: usize) -> &[f64];
     /// The position at quadrature node `i`.
@@ -323,6 +326,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn reject_carry(&mut self) {
         forward!(self, b => b.reject_carry())
+    }
+    fn set_costly_factors(&mut self, costly: bool) {
+        forward!(self, b => b.set_costly_factors(costly))
     }
     #[inline(always)]
     fn node_fq(&self, i: usize) -> &[f64] {

@@ -224,6 +224,10 @@ impl StepBackend for SparseBackend<'_> {
         self.newton.iteration.reject_carry()
     }
 
+    fn set_costly_factors(&mut self, costly: bool) {
+        self.newton.iteration.set_costly_factors(costly)
+    }
+
     #[inline(always)]
     fn node_fq(&self, i: usize) -> &[f64] {
         let n = self.prob.n;

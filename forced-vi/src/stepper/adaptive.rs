@@ -5,7 +5,7 @@
 use super::Stepper;
 use super::checks::step_count;
 use crate::backend::{StepBackend, StepFailure};
-use crate::control::Tolerance;
+use crate::control::{BAND, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::StepRecord;
@@ -78,6 +78,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.round_off_sq = round_off;
                         self.estimate = err / per_unit;
                         self.h_next = self.controller.accept(h, err);
+                        if self.band && self.h_next >= h && self.h_next <= BAND * h {
+                            self.h_next = h;
+                        }
                         self.t = if last { self.t_final } else { t0 + h };
                         return self.finish_step(iters, res, 1);
                     }

@@ -49,6 +49,13 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             tolerance,
             ..
         } = setup;
+        // A model with sparse kernels, large enough for the sparse backend: the same rule on
+        // either backend, so that a run takes the same steps on both.
+        let band = model.sparse_node().is_some() && N >= crate::LinearPath::SPARSE_MIN_DOF;
+        let mut reference = reference;
+        if let Some(r) = reference.as_mut() {
+            r.set_costly_factors(band);
+        }
         check_run(&options, t_final)?;
         options.check_step_bounds()?;
         // The step polynomial (and its node blocks, or a constrained step's multipliers)
@@ -110,6 +117,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             controller: Controller::new(scheme.order()),
             h_next: h.min(options.max_step),
             estimate: 0.0,
+            band,
             lean: false,
             tangent: None,
             tape: None,
