@@ -78,7 +78,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.round_off_sq = round_off;
                         self.estimate = err / per_unit;
                         self.h_next = self.controller.accept(h, err);
-                        if self.band && self.h_next >= h && self.h_next <= BAND * h {
+                        if self.band && (BAND.0 * h..=BAND.1 * h).contains(&self.h_next) {
                             self.h_next = h;
                         }
                         self.t = if last { self.t_final } else { t0 + h };

@@ -179,8 +179,8 @@ pub struct Stepper<'a, M, const N: usize> {
     /// The last accepted step's [`StepRecord::error_estimate`].
     estimate: f64,
     /// Adaptive runs of a model whose factors cost most of a step (see
-    /// [`crate::control`]'s step-size band): a step that would grow by less than
-    /// [`crate::control::BAND`] keeps its size, and so its factors.
+    /// [`crate::control`]'s step-size band): a step that the controller would resize by a
+    /// factor within `crate::control::BAND` keeps its size, and so its factors.
     band: bool,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
