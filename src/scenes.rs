@@ -123,8 +123,8 @@ pub trait Scene: Send + Sync {
     /// `points` times `t ∈ (0, T)` of `‖Φ_q(T, t)‖∞`, the rows in `q_T` of the tangent map
     /// from `(q, p)` at `t` to `(q, p)` at `T` (max row sum). Local errors of size `δ` per
     /// unit step add up to a final error of about `δ` times this. From
-    /// [`forced_vi::output::Tangents`] (lobatto4, 4000 steps over the run).
-    fn amplification(&self, points: usize) -> Result<f64, SceneError>;
+    /// [`forced_vi::output::Tangents`] (lobatto4, `steps` steps over the run).
+    fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError>;
     /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
     fn balance_variational(
         &self,
@@ -344,10 +344,10 @@ where
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ, member)
     }
-    fn amplification(&self, points: usize) -> Result<f64, SceneError> {
+    fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError> {
         let (q0, v0) = self.start(0)?;
         let init = InitialState::from_velocity(q0, v0);
-        let h = self.t_final / 4000.0;
+        let h = self.t_final / steps.max(1) as f64;
         let scheme = Scheme::lobatto(4).map_err(forced_vi::Error::from)?;
         let integ = Integrator::new(&self.model, scheme, h)?;
         // The (q, p) tangent M(t, 0) = P(t) S(t) P(0)⁻¹, with P = [[I, 0], [C, E]].

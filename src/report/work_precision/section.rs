@@ -273,10 +273,7 @@ struct Proportionality {
     amplification: Option<f64>,
 }
 
-/// Times at which the amplification samples `Φ(T, t)`.
-const AMPLIFICATION_POINTS: usize = 16;
-
-fn proportionality(scenes: &[&dyn Scene], summary: &Summary) -> Vec<Proportionality> {
+fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec<Proportionality> {
     let mut out = Vec::new();
     for s in scenes {
         let mut amplification = None;
@@ -286,7 +283,10 @@ fn proportionality(scenes: &[&dyn Scene], summary: &Summary) -> Vec<Proportional
                 continue;
             }
             if amplification.is_none() {
-                amplification = Some(s.amplification(AMPLIFICATION_POINTS).ok());
+                amplification = Some(
+                    s.amplification(plan.amplification_points, plan.amplification_steps)
+                        .ok(),
+                );
             }
             let scale = reference_scale(*s)[0];
             let pts: Vec<(f64, f64)> = rows
@@ -312,7 +312,7 @@ fn proportionality(scenes: &[&dyn Scene], summary: &Summary) -> Vec<Proportional
 }
 
 fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
-    let lines = proportionality(scenes, summary);
+    let lines = proportionality(plan, scenes, summary);
     if lines.is_empty() {
         return String::new();
     }
@@ -332,10 +332,12 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
          log tol over the points above the round-off floor (target 0.8–1.2); worst err/tol: the largest final error in q \
          over its tolerance (target ≤ 10). The controller bounds the local error per unit step; the final error is \
          those local errors carried to T by the flow, so it is about tol times the flow's amplification A: the mean over \
-         {AMPLIFICATION_POINTS} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
-         (`output::Tangents`, lobatto4 at 4000 steps, member 0 of the ensemble). The last column divides by it: \
+         {} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
+         (`output::Tangents`, lobatto4 at {} steps, member 0 of the ensemble). The last column divides by it: \
          on a chaotic scene, where A is large, it is the calibration that is left.\n\n",
-        tols.join(", ")
+        tols.join(", "),
+        plan.amplification_points,
+        plan.amplification_steps,
     );
     md.push_str(&markdown(
         &lines,
