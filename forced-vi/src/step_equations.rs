@@ -45,19 +45,22 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     fn nodes(&mut self, z: &DVector<f64>) {
         let (zs, _) = z.as_slice().as_chunks::<N>();
+        // The increments of control points 1 … s − 1 (control point 0 is `q_k` itself,
+        // increment 0); the constraint unknowns after them are not positions.
+        let s1 = self.scheme.stages() - 1;
+        let zs = &zs[..s1.min(zs.len())];
         let inv_h = 1.0 / self.h;
         for (i, (xi, vi)) in self.xs.iter_mut().zip(self.vs.iter_mut()).enumerate() {
             let (phi, psi) = self.scheme.basis_rows(i);
-            let mut x = self.q0;
-            let mut v = SVector::<f64, N>::zeros();
-            // Control point 0 is `q_k` itself (increment 0).
-            for ((zj, &ph), &ps) in zs.iter().zip(&phi[1..]).zip(&psi[1..]) {
-                if ph != 0.0 {
-                    for a in 0..N {
-                        x[a] += ph * zj[a];
-                    }
-                }
+            let (Some(phi), Some(psi)) = (phi.get(1..=zs.len()), psi.get(1..=zs.len())) else {
+                continue;
+            };
+            let (mut x, mut v) = (self.q0, SVector::<f64, N>::zeros());
+            // One pass over the control points, no test on the weights (a zero weight of
+            // `Φ` adds zero).
+            for ((zj, &ph), &ps) in zs.iter().zip(phi).zip(psi) {
                 for a in 0..N {
+                    x[a] += ph * zj[a];
                     v[a] += ps * zj[a];
                 }
             }
