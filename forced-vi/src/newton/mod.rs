@@ -189,8 +189,11 @@ impl Newton {
     ///
     /// `residual_scale` sets the units of the residual test. Convergence needs both a small
     /// estimated error in `z`, from the contraction rate `θ = |Δz_k| / |Δz_{k−1}|` as in
-    /// Hairer's codes, and a small residual. A step that does not reduce the residual is
-    /// halved (line search); repeated growth is divergence.
+    /// Hairer's codes, and a small residual; or a residual at its round-off floor (below),
+    /// which no further correction reduces. After the first correction, whose contraction
+    /// is not known yet, only a sixteenth of that floor counts: a linear system lands there
+    /// in one correction and is not solved twice. A step that does not reduce the residual
+    /// is halved (line search); repeated growth is divergence.
     ///
     /// An `Ok` iterate `z` (max-norms throughout) satisfies the stated bound
     ///

@@ -92,6 +92,42 @@ fn trust_newton_huge_guess_is_not_accepted_early() {
     }
 }
 
+/// A linear system is solved by its first correction, whose residual lands at a few ε of
+/// its terms: the solve ends there instead of taking a second correction to confirm it. A
+/// nonlinear one does not stop at its first iterate.
+#[test]
+fn a_linear_system_ends_after_one_correction() {
+    let a = DMatrix::from_row_slice(
+        4,
+        4,
+        &[
+            4.0, -1.0, 0.5, 0.0, 1.0, 5.0, -2.0, 0.3, 0.2, -0.7, 3.0, 1.0, -1.0, 0.0, 0.4, 6.0,
+        ],
+    );
+    let b = DVector::from_vec(vec![1.0, -2.0, 3.5, 0.25]);
+    let exact = a.clone().lu().solve(&b).unwrap();
+    for (c, one) in [(0.0, true), (0.3, false)] {
+        let mut sys = Poly {
+            a: a.clone(),
+            b: b.clone(),
+            c,
+        };
+        for simplified in [true, false] {
+            let mut n = Newton::new(4, NewtonOptions::default().simplified(simplified));
+            let mut z = DVector::from_vec(vec![0.3, -0.1, 0.9, 0.0]);
+            let rep = n.solve(&mut sys, &mut z, 1.0).unwrap();
+            assert_eq!(rep.iterations == 1, one, "c = {c}: {rep:?}");
+            if c == 0.0 {
+                assert!(
+                    (&z - &exact).amax() < 1e-15 * 8.0,
+                    "{}",
+                    (&z - &exact).amax()
+                );
+            }
+        }
+    }
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
     /// Whatever the guess, `solve` meets its stated bound or returns an error; for a
