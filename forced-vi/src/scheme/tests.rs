@@ -128,3 +128,33 @@ fn the_order_follows_the_tolerance_and_the_backend() {
     assert_eq!(stages(1e-4, true), 3);
     assert_eq!(stages(1e-8, true), 4);
 }
+
+#[test]
+fn basis_at_agrees_with_the_lagrange_products() {
+    for s in 2..=10 {
+        let sch = Scheme::lobatto(s).unwrap();
+        let d = sch.d().to_vec();
+        let mut out = vec![f64::NAN; s];
+        for &tau in &[1.0, 1.01, 1.3, 1.75, 2.0, 2.9, 0.25] {
+            sch.basis_at(tau, &mut out);
+            let want: Vec<f64> = (0..s).map(|m| lagrange(&d, m, tau)).collect();
+            let size = want.iter().map(|x| x.abs()).fold(1.0, f64::max);
+            close(&out, &want, 64.0 * f64::EPSILON * size);
+            // A partition of unity, at the nodes too.
+            let sum: f64 = out.iter().sum();
+            assert!(
+                (sum - 1.0).abs() <= 64.0 * f64::EPSILON * size,
+                "s = {s}, τ = {tau}"
+            );
+        }
+        for (j, &dj) in d.iter().enumerate() {
+            sch.basis_at(dj, &mut out);
+            for (m, &l) in out.iter().enumerate() {
+                assert_eq!(l == 0.0, m != j, "s = {s}, node {j}: ℓ_{m} = {l}");
+                if m == j {
+                    assert!((l - 1.0).abs() <= 8.0 * f64::EPSILON);
+                }
+            }
+        }
+    }
+}

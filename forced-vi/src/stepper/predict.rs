@@ -26,13 +26,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 }
                 continue;
             }
-            let tau = 1.0 + dj * h / st.h_prev;
-            for (m, l) in basis.iter_mut().enumerate().skip(1) {
-                *l = if same {
-                    sch.extrapolation(j, m)
-                } else {
-                    sch.basis_at(tau, m)
-                };
+            if same {
+                for (m, l) in basis.iter_mut().enumerate().skip(1) {
+                    *l = sch.extrapolation(j, m);
+                }
+            } else {
+                sch.basis_at(1.0 + dj * h / st.h_prev, basis);
             }
             for a in 0..N {
                 let mut x = -st.z_prev[lay.at(s1, a)];
