@@ -320,7 +320,7 @@ their last attempt) for another reason: error control per unit step (see Adaptiv
 a step of size h the budget tol·h/T of the local error, and here T = 2·10⁶ in t while the \
 initial layer (from x' = 0, off the slow manifold) and the jump need h ≈ 10⁻⁸: a budget of \
 10⁻¹⁵ relative or less, the round-off of the state. The steps shrink until they reach the \
-floor 16ε·t (3·10⁻⁹ at the jump's t ≈ 8·10⁵); traced on lobatto4 at tol 1e-1: 1474 steps, \
+floor 16ε·t (3·10⁻⁹ at the jump's t ≈ 8·10⁵); traced on lobatto4 at tol 1e-1: 1642 steps, \
 through the jump at h ≈ 10⁻⁸, then `step_size_too_small` at t = 806852.8. BDF succeeds \
 at tol ≤ 1e-5 and ESDIRK34 only at tol ≤ 1e-8.\n\
 - **Mildly stiff problems are a draw.** On the over-damped oscillator (ζ = 100, hλ up to 200) \
