@@ -152,22 +152,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             jac.fill(0.0);
         }
         let js = jac.as_mut_slice();
-        // A constant mass: `C ≡ 0` and `E` done, so only the terms on `A` and `B` (for
-        // Lobatto, where `Φ = I`, `s − 1` of the first and `(s − 1)²` of the second).
-        let terms = if constant_mass {
-            sch.mixed_jacobian_terms()
+        if constant_mass {
+            // `C ≡ 0` and `E` done, so only the terms on `A` and `B` (for Lobatto, where
+            // `Φ = I`, `s − 1` of the first and `(s − 1)²` of the second), each list without
+            // the others' zeros.
+            let (a_terms, b_terms) = sch.force_jacobian_terms();
+            for t in a_terms {
+                add_block(js, rows, t.j, t.m, t.a * h, &self.jacs[t.i].a);
+            }
+            for t in b_terms {
+                add_block(js, rows, t.j, t.m, t.b, &self.jacs[t.i].b);
+            }
         } else {
-            sch.jacobian_terms()
-        };
-        for t in terms {
-            let nj = &self.jacs[t.i];
-            if t.a != 0.0 {
-                add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
-            }
-            if t.b != 0.0 {
-                add_block(js, rows, t.j, t.m, t.b, &nj.b);
-            }
-            if !constant_mass {
+            for t in sch.jacobian_terms() {
+                let nj = &self.jacs[t.i];
+                if t.a != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.a * h, &nj.a);
+                }
+                if t.b != 0.0 {
+                    add_block(js, rows, t.j, t.m, t.b, &nj.b);
+                }
                 if t.c != 0.0 {
                     add_block(js, rows, t.j, t.m, t.c, &nj.c);
                 }

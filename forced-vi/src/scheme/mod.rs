@@ -76,9 +76,10 @@ struct Tables {
     psi: Vec<f64>,
     /// The non-zero terms of the Jacobian chain rule, see [`JacobianTerm`].
     terms: Vec<JacobianTerm>,
-    /// Those of `terms` with a non-zero coefficient on `A`, `B` or `C`: all there is besides
-    /// the `E` part for a constant mass matrix.
-    mixed: Vec<JacobianTerm>,
+    /// Those of `terms` with a non-zero coefficient on `A`, and those with one on `B`: all
+    /// there is besides the `E` part for a constant mass matrix (where `C ≡ 0`).
+    a_terms: Vec<JacobianTerm>,
+    b_terms: Vec<JacobianTerm>,
     /// `b_i Φ_ij` and `b_i Ψ_ij`, row `j` (see [`Scheme::residual_weights`]).
     res_phi: Vec<f64>,
     res_psi: Vec<f64>,
@@ -251,11 +252,8 @@ impl Scheme {
                 b,
                 phi,
                 psi,
-                mixed: terms
-                    .iter()
-                    .copied()
-                    .filter(|t| t.a != 0.0 || t.b != 0.0 || t.c != 0.0)
-                    .collect(),
+                a_terms: terms.iter().copied().filter(|t| t.a != 0.0).collect(),
+                b_terms: terms.iter().copied().filter(|t| t.b != 0.0).collect(),
                 res_phi,
                 res_psi,
                 terms,
@@ -326,9 +324,9 @@ impl Scheme {
         &self.t.terms
     }
 
-    /// The terms with a non-zero coefficient on `A`, `B` or `C`.
-    pub(crate) fn mixed_jacobian_terms(&self) -> &[JacobianTerm] {
-        &self.t.mixed
+    /// The terms with a non-zero coefficient on `A`, and those with one on `B`.
+    pub(crate) fn force_jacobian_terms(&self) -> (&[JacobianTerm], &[JacobianTerm]) {
+        (&self.t.a_terms, &self.t.b_terms)
     }
 
     /// The classical order of the scheme.
