@@ -40,10 +40,21 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) blocks_given: bool,
     /// `h |A| |x|` at the last Jacobian ([`NonlinearSystem::residual_noise`]).
     pub(crate) noise: f64,
+    /// The unknowns `xs` and `vs` were last computed from, while `nodes_valid` (cleared
+    /// when `h`, `t0` or `q0` change): a Jacobian at the point of the last residual, as
+    /// Newton asks for, takes the node values as they are.
+    pub(crate) nodes_z: Vec<f64>,
+    pub(crate) nodes_valid: bool,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     fn nodes(&mut self, z: &DVector<f64>) {
+        if self.nodes_valid && self.nodes_z[..] == z.as_slice()[..] {
+            return;
+        }
+        self.nodes_z.clear();
+        self.nodes_z.extend_from_slice(z.as_slice());
+        self.nodes_valid = true;
         let (zs, _) = z.as_slice().as_chunks::<N>();
         // The increments of control points 1 … s − 1 (control point 0 is `q_k` itself,
         // increment 0); the constraint unknowns after them are not positions.

@@ -60,6 +60,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 gjac: vec![DMatrix::zeros(cons, N); s],
                 blocks_given: false,
                 noise: 0.0,
+                nodes_z: Vec::with_capacity(dim),
+                nodes_valid: false,
             },
             impulse: Vec::new(),
             mu: vec![0.0; cons],
@@ -237,6 +239,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         scale: f64,
     ) -> Result<NewtonReport, StepFailure> {
         let prob = &mut self.prob;
+        prob.nodes_valid = false;
         prob.h = h;
         prob.t0 = t0;
         prob.q0.as_mut_slice().copy_from_slice(q0);
@@ -457,6 +460,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
         let prob = &mut self.prob;
+        prob.nodes_valid = false;
         prob.h = h;
         prob.t0 = t0;
         prob.q0.as_mut_slice().copy_from_slice(q0);
