@@ -307,7 +307,7 @@ fn sensitivity_subdivided_steps_are_carried() {
     let (q0, v0) = ([1.0, 0.0], [0.0, 1.1]);
     let integ = Integrator::new(&model, Scheme::lobatto(3).expect("scheme"), 1.0)
         .expect("integrator")
-        .newton(NewtonOptions::default().max_iterations(3))
+        .newton(NewtonOptions::default().max_iterations(2))
         .max_subdivisions(6);
     let s = integ
         .solve(InitialState::from_velocity(q0, v0), 8.0, output::Tangents)

@@ -78,6 +78,13 @@ impl Layout {
         self.multipliers + k * self.constraint + j * self.point
     }
 
+    /// The number of increments `(m, a)`: they come first, in `0 … increments()`, in
+    /// either order.
+    #[inline(always)]
+    pub(crate) fn increments(&self) -> usize {
+        self.multipliers
+    }
+
     /// The index of unknown `(m, a)`.
     #[inline(always)]
     pub(crate) fn at(&self, m: usize, a: usize) -> usize {

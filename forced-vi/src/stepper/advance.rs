@@ -42,7 +42,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         } else {
             self.ledger_increment(h)
         };
-        self.commit(h, dw);
+        self.commit(h, dw, rep.iterations);
         Ok((rep.iterations, rep.residual))
     }
 
@@ -50,7 +50,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// h Σ_i b_i (L_q + F)_i`, a small increment, which keeps round-off low: DESIGN §3) and
     /// the ledger, the predictor's polynomial, the time.
     #[inline]
-    fn commit(&mut self, h: f64, dw: f64) {
+    fn commit(&mut self, h: f64, dw: f64, iterations: usize) {
         let sch = self.scheme;
         let (s1, r) = (sch.stages() - 1, sch.quadrature_nodes());
         let lay = self.backend.layout();
@@ -77,6 +77,38 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         st.v.copy_from_slice(&self.v_end);
         st.add_work(dw);
         st.z_prev.copy_from_slice(z);
+        // The extrapolation's errors are kept from a step that took more than one Newton
+        // iteration on, while correcting by them helps (see `Stepper::predict`).
+        if self.extrapolated_same && (iterations > 1 || st.deltas > 0) {
+            // The error of the extrapolation at this step, and what the correction by the
+            // last two steps' errors left of it (applied or not), in one pass that also
+            // keeps the new error.
+            let n = lay.increments();
+            let (ext, d1) = (&self.extrapolated[..n], &st.pred_delta[..n]);
+            let (mut plain, mut corrected) = (0.0f64, 0.0f64);
+            for (((x, e), d), c) in z[..n]
+                .iter()
+                .zip(ext)
+                .zip(d1)
+                .zip(&mut st.pred_delta_prev[..n])
+            {
+                let new = x - e;
+                let (a, b) = (new.abs(), (new - (2.0 * d - *c)).abs());
+                plain = if a > plain { a } else { plain };
+                corrected = if b > corrected { b } else { corrected };
+                *c = new;
+            }
+            std::mem::swap(&mut st.pred_delta, &mut st.pred_delta_prev);
+            // Measured before it is used: not until two errors are kept.
+            st.delta_helps = st.deltas == 2 && corrected <= 0.5 * plain;
+            st.deltas = if st.deltas == 2 && !st.delta_helps {
+                0
+            } else {
+                (st.deltas + 1).min(2)
+            };
+        } else {
+            st.deltas = 0;
+        }
         st.has_prev = true;
         st.h_prev = h;
         st.t_state += h;

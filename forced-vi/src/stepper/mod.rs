@@ -169,6 +169,10 @@ pub struct Stepper<'a, M, const N: usize> {
     dp: Vec<f64>,
     /// Scratch: the predictor's basis values at one control point (entry `m = 1 … s − 1`).
     basis: Vec<f64>,
+    /// The predictor's extrapolation for the step being solved, before the correction by
+    /// the last step's `pred_delta`, and whether it was made at an unchanged step size.
+    extrapolated: Vec<f64>,
+    extrapolated_same: bool,
     err: (Vec<f64>, Vec<f64>),
     /// The time of the record last handed out.
     t: f64,

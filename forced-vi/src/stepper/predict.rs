@@ -1,5 +1,21 @@
 //! The predictor: the previous step's polynomial extrapolated to the new step (rescaled
 //! when `h` changes), or a straight line along `v` on a first step.
+//!
+//! At an unchanged step size the extrapolation is also corrected by its own error. That
+//! error, the solved increments less the extrapolated ones, is `O(h^(s+1))` and, over steps
+//! of one size, a smooth function of time: the errors of the last two steps, extrapolated
+//! linearly (`2 δ_n − δ_{n−1}`), leave `O(h^(s+3))`. A step measures what the correction
+//! would have left of its own error; the correction is used while that is at most half the
+//! uncorrected error, and the errors are only kept from a step that took more than one Newton
+//! iteration on, so a run whose predictor already suffices pays nothing for them. The
+//! predictor is only a starting guess: the solve's tests decide, as before.
+//!
+//! Measured (coupled van der Pol, fixed steps, instructions for 100 runs): lobatto3 at
+//! `h = 0.01`, 64.4M → 54.1M (Newton iterations per step 1.78 → 1.04); at `h = 1/38`,
+//! 30.9M → 26.7M; lobatto5 at `h = 1/38`, 44.6M → 41.2M (1.63 → 1.11 iterations), at
+//! `h = 0.01` (one iteration either way) 99.2M → 99.9M. Where the steps are too long for
+//! the errors to be smooth (Kepler, 24 lobatto7 steps over `T = 20`) the correction is
+//! measured not to help and is not used: 73.4M → 74.3M, the same 53 iterations.
 
 use super::Stepper;
 use crate::backend::StepBackend;
@@ -16,7 +32,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         // Equal steps use the table made once; sizes that differ by round-off (a fixed step
         // between grid times `k h`) count as equal, the predictor being only a guess.
         let same = (h - st.h_prev).abs() <= 1e-8 * h;
-        let basis = &mut self.basis;
+        // At an unchanged step size the extrapolation's error is a smooth function of time,
+        // `O(h^(s+1))`: its values over the last two steps, extrapolated linearly, are added
+        // back where that has been measured to help (see `Stepper::commit`).
+        self.extrapolated_same = extrapolate && same;
+        let correct = self.extrapolated_same && st.deltas == 2 && st.delta_helps;
+        let (basis, ext) = (&mut self.basis, &mut self.extrapolated);
         let z = self.backend.z_mut();
         for j in 1..=s1 {
             let dj = sch.d()[j];
@@ -38,7 +59,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 for (m, l) in basis.iter().enumerate().skip(1) {
                     x += st.z_prev[lay.at(m, a)] * l;
                 }
-                z[lay.at(j, a)] = x;
+                let i = lay.at(j, a);
+                (z[i], ext[i]) = (x, x);
+            }
+        }
+        if correct {
+            let n = lay.increments();
+            let (d1, d0) = (&st.pred_delta[..n], &st.pred_delta_prev[..n]);
+            for ((x, d), e) in z[..n].iter_mut().zip(d1).zip(d0) {
+                *x += 2.0 * d - e;
             }
         }
     }

@@ -89,6 +89,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
         state.h_prev = h;
         let saved = state.clone();
+        let unknowns = state.z_prev.len();
         Ok(Stepper {
             model,
             scheme,
@@ -111,6 +112,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             v_end: vec![0.0; N],
             dp: vec![0.0; N],
             basis: vec![0.0; scheme.stages()],
+            extrapolated: vec![0.0; unknowns],
+            extrapolated_same: false,
             err: (vec![0.0; N], vec![0.0; N]),
             t: 0.0,
             tolerance,

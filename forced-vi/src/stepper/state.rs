@@ -51,6 +51,13 @@ pub(crate) struct State {
     pub(crate) z_prev: Vec<f64>,
     pub(crate) has_prev: bool,
     pub(crate) h_prev: f64,
+    /// The last two steps' increments less the predictor's extrapolation, at an unchanged
+    /// step size (see `Stepper::predict`); `deltas` of them are valid (0, 1 or 2), and
+    /// whether correcting the extrapolation by them helped at the last step.
+    pub(crate) pred_delta: Vec<f64>,
+    pub(crate) pred_delta_prev: Vec<f64>,
+    pub(crate) deltas: u8,
+    pub(crate) delta_helps: bool,
     /// The largest `|L_q + F|` at a node of the last step: the residual's force scale.
     pub(crate) scale_f: f64,
     /// The time of `(q, p)` (ahead of the last record between substeps).
@@ -68,6 +75,10 @@ impl State {
             z_prev: vec![0.0; unknowns],
             has_prev: false,
             h_prev: 1.0,
+            pred_delta: vec![0.0; unknowns],
+            pred_delta_prev: vec![0.0; unknowns],
+            deltas: 0,
+            delta_helps: false,
             scale_f: 0.0,
             t_state: 0.0,
         }
@@ -82,6 +93,10 @@ impl State {
         self.z_prev.copy_from_slice(&other.z_prev);
         self.has_prev = other.has_prev;
         self.h_prev = other.h_prev;
+        self.pred_delta.copy_from_slice(&other.pred_delta);
+        self.pred_delta_prev.copy_from_slice(&other.pred_delta_prev);
+        self.deltas = other.deltas;
+        self.delta_helps = other.delta_helps;
         self.scale_f = other.scale_f;
         self.t_state = other.t_state;
     }
