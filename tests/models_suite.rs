@@ -16,6 +16,8 @@ mod final_state;
 mod generated_models;
 #[path = "macro_kernels.rs"]
 mod macro_kernels;
+#[path = "predictor.rs"]
+mod predictor;
 #[path = "sensitivity.rs"]
 mod sensitivity;
 #[path = "sparse.rs"]
