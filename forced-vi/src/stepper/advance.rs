@@ -175,14 +175,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let levels =
             (self.options.max_subdivisions).min(super::StepOptions::MAX_SUBDIVISION_LEVELS);
         // A failed attempt changes nothing of the state (only a solved step commits), so
-        // the state needs saving only for substeps, which commit one by one.
-        if levels > 0 {
+        // the state needs saving only for substeps, which commit one by one: when the first
+        // of them is tried. A sensitivity or adjoint run saves it first, since its step can
+        // fail after the commit (in `carry`).
+        let eager = levels > 0 && (self.tangent.is_some() || self.tape.is_some());
+        if eager {
             self.saved.copy_from(&self.state);
         }
         for level in 0..=levels {
             let parts = 1usize << level;
             let hs = h / parts as f64;
             if level == 1 {
+                if !eager {
+                    self.saved.copy_from(&self.state);
+                }
                 if let Some(tg) = self.tangent.as_mut() {
                     tg.save();
                 }
@@ -210,7 +216,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     return self.finish_step(iters, res, parts);
                 }
                 Err(f) => {
-                    if levels > 0 {
+                    if level > 0 || eager {
                         self.state.copy_from(&self.saved);
                     }
                     if level > 0 {

@@ -88,7 +88,9 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let energy0 = energy(model, 0.0, q0, v0, p0)
             .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
         state.h_prev = h;
-        let saved = state.clone();
+        // Filled (and allocated) when first needed: by every adaptive step, and by a fixed
+        // step only if it is subdivided.
+        let saved = State::empty();
         let unknowns = state.z_prev.len();
         Ok(Stepper {
             model,

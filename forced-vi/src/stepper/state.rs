@@ -1,6 +1,7 @@
 //! What a step changes and how it is saved: compensated positions, momenta and ledger, the
-//! velocity, the predictor's polynomial, with a copy made in place for retries. Every
-//! vector lives on the heap, made once per run, whatever the model's size.
+//! velocity, the predictor's polynomial, with a copy for retries, made in place. Every
+//! vector lives on the heap, made at most once per run (the copy's when first needed),
+//! whatever the model's size.
 
 /// One compensated (Kahan) addition of `dx` to `sum`, whose running compensation is `comp`.
 /// Every compensated sum of the crate (DESIGN §3: `q`, `p` and the ledger) goes through it.
@@ -34,8 +35,8 @@ impl KahanVec {
     }
 
     fn copy_from(&mut self, other: &KahanVec) {
-        self.sum.copy_from_slice(&other.sum);
-        self.comp.copy_from_slice(&other.comp);
+        self.sum.clone_from(&other.sum);
+        self.comp.clone_from(&other.comp);
     }
 }
 
@@ -84,17 +85,22 @@ impl State {
         }
     }
 
-    /// Copies `other` into `self` without allocating.
+    /// A state with no vectors yet (none allocated), for [`State::copy_from`] to fill.
+    pub(crate) fn empty() -> Self {
+        State::new(0, 0)
+    }
+
+    /// Copies `other` into `self`, allocating only into an [`State::empty`] one.
     pub(crate) fn copy_from(&mut self, other: &State) {
         self.q.copy_from(&other.q);
         self.p.copy_from(&other.p);
-        self.v.copy_from_slice(&other.v);
+        self.v.clone_from(&other.v);
         self.work = other.work;
-        self.z_prev.copy_from_slice(&other.z_prev);
+        self.z_prev.clone_from(&other.z_prev);
         self.has_prev = other.has_prev;
         self.h_prev = other.h_prev;
-        self.pred_delta.copy_from_slice(&other.pred_delta);
-        self.pred_delta_prev.copy_from_slice(&other.pred_delta_prev);
+        self.pred_delta.clone_from(&other.pred_delta);
+        self.pred_delta_prev.clone_from(&other.pred_delta_prev);
         self.deltas = other.deltas;
         self.delta_helps = other.delta_helps;
         self.scale_f = other.scale_f;
