@@ -118,6 +118,28 @@ fn quick_report_writes_csvs_plots_and_the_paper_orders() {
     let external = "heyoka (external, measured at commit time, JIT excluded)";
     assert!(section.contains(&format!("| {external} |")));
     assert!(section.contains("**Bold**: the cheapest of the methods timed by this run."));
+    // The best variational run against the best baseline, timed again in alternation: a row
+    // per scene and target where both reached it, each with a ratio.
+    let paired = section
+        .split("### The best variational run against the best baseline, timed in alternation")
+        .nth(1)
+        .expect("the paired timing section");
+    let rows: Vec<&str> = paired
+        .lines()
+        .take_while(|l| !l.starts_with("###"))
+        .filter(|l| l.starts_with("| `"))
+        .collect();
+    assert!(rows.len() >= 8, "{rows:?}");
+    for row in &rows {
+        let ratio: f64 = row
+            .trim_end_matches(" |")
+            .rsplit("| ")
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(ratio.is_finite() && ratio > 0.0, "{row}");
+    }
     assert!(read(&out.join("work_precision_kepler_drag.svg")).contains(external));
     let ensemble = read(&out.join("work_precision_coupled_van_der_pol_ensemble.svg"));
     assert!(!ensemble.contains("heyoka"));

@@ -168,6 +168,13 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
         summary.failures.extend(failures);
         summary.large = accuracy;
     }
+    for scene in &selected {
+        for target in section::TARGETS {
+            summary
+                .paired
+                .extend(sweep::paired(*scene, &summary, target, &plan));
+        }
+    }
     sweep::fit_orders(&selected, &mut summary);
     summary.elapsed = started.elapsed().as_secs_f64();
     write_outputs(opts, &plan, &selected, &summary)?;

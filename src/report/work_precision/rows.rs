@@ -177,6 +177,34 @@ pub struct Summary {
     /// External baselines on the selected scenes (heyoka): committed measurements, not
     /// runs of this report.
     pub external: External,
+    /// The cheapest variational run against the cheapest baseline per scene and target,
+    /// timed again in alternation (see [`super::sweep::paired`]).
+    pub paired: Vec<Paired>,
+}
+
+/// The cheapest variational run and the cheapest baseline run reaching one error target on
+/// one scene, timed again in alternating rounds right after each other.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Paired {
+    /// The scene.
+    pub scene: &'static str,
+    /// The error target in q.
+    pub target: f64,
+    /// The variational run: method, mode and `h` or tolerance.
+    pub variational: (Method, Mode, f64),
+    /// The baseline run: method and tolerance.
+    pub baseline: (Method, f64),
+    /// Their median wall times over the rounds, seconds, or why a run failed this time.
+    pub seconds: Result<(f64, f64), String>,
+    /// The rounds (each runs both, alternating which goes first).
+    pub rounds: usize,
+}
+
+impl Paired {
+    /// Variational time over baseline time (below 1: the variational run is faster).
+    pub fn ratio(&self) -> Option<f64> {
+        self.seconds.as_ref().ok().map(|(v, b)| v / b)
+    }
 }
 
 impl Summary {

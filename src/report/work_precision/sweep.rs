@@ -3,7 +3,7 @@
 use forced_vi::Scheme;
 use rayon::prelude::*;
 
-use super::rows::{Failure, Mode, OrderRow, Row, Spread, Summary};
+use super::rows::{Failure, Mode, OrderRow, Paired, Row, Spread, Summary};
 use crate::report::orders;
 use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
 use crate::report::study::Study;
@@ -156,6 +156,48 @@ fn measure(
         err: spreads(scene, &outcomes)?,
     };
     Ok((row, timing.first_seconds))
+}
+
+/// The cheapest variational run and the cheapest baseline run of `summary` whose error in q
+/// on `scene` is at most `target`, timed again in alternating rounds (`None` when either
+/// never reached it).
+///
+/// The sweeps time each run once, at its own moment; on a machine shared with other jobs
+/// the speed drifts between those moments (measured: the same baseline run 1.8 times slower
+/// in one report than in the next), and the ratio of two such times carries the drift.
+/// Timed in alternation, right after each other, both runs see the same machine.
+pub fn paired(scene: &dyn Scene, summary: &Summary, target: f64, plan: &Plan) -> Option<Paired> {
+    let cheapest = |variational: bool| {
+        summary
+            .rows
+            .iter()
+            .filter(|r| r.scene == scene.name() && r.method.is_variational() == variational)
+            .filter(|r| r.errors()[0] <= target)
+            .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
+    };
+    let (vi, base) = (cheapest(true)?, cheapest(false)?);
+    let (vi_scheme, base_scheme) = (vi.method.scheme(), base.method.scheme());
+    let sample = |row: &Row, scheme: Option<&Scheme>| {
+        let (out, seconds) =
+            timing::timed(|| run_members(scene, (&row.method, row.mode), scheme, row.h_or_tol));
+        out.map(|_| seconds)
+    };
+    let rounds = plan
+        .repeats(vi.seconds.max(base.seconds))
+        .max(plan.max_repeats.min(5));
+    let seconds = timing::interleaved(
+        rounds,
+        || sample(vi, vi_scheme.as_ref()),
+        || sample(base, base_scheme.as_ref()),
+    );
+    Some(Paired {
+        scene: scene.name(),
+        target,
+        variational: (vi.method, vi.mode, vi.h_or_tol),
+        baseline: (base.method, base.h_or_tol),
+        seconds,
+        rounds,
+    })
 }
 
 /// The grid of `method` in `mode` on `scene`: step sizes, or tolerances (second-order
