@@ -40,6 +40,23 @@ impl<const N: usize> InitialState<N> {
     pub fn from_momentum(q: [f64; N], p: [f64; N]) -> Self {
         InitialState::Momentum { q, p }
     }
+
+    /// `(q₀, v₀, true)` or `(q₀, p₀, false)`.
+    pub(crate) fn parts(&self) -> (&[f64], &[f64], bool) {
+        match self {
+            InitialState::Velocity { q, v } => (q, v, true),
+            InitialState::Momentum { q, p } => (q, p, false),
+        }
+    }
+
+    /// `(q₀, Some(v₀))` or `(q₀, None)`.
+    #[cfg_attr(not(feature = "sparse"), allow(dead_code))]
+    pub(crate) fn as_slices(&self) -> (&[f64], Option<&[f64]>) {
+        match self {
+            InitialState::Velocity { q, v } => (q, Some(v)),
+            InitialState::Momentum { q, .. } => (q, None),
+        }
+    }
 }
 
 /// Mass matrices whose equilibrated reciprocal condition is below this are singular.

@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, DVector, SVector};
 use super::{Layout, StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
 use crate::initial::{MIN_MASS_RCOND, mass_check, mass_factor, solve_velocity};
-use crate::model::ForcedLagrangian;
+use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
 use crate::newton::{DenseLu, Newton, NewtonOptions, NewtonReport, solve_small};
 use crate::scalar::all_finite;
 use crate::scheme::Scheme;
@@ -115,92 +115,123 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
     /// last residual evaluation, which was at the solution.
     fn project(&mut self) -> Result<(), StepFailure> {
         let prob = &self.prob;
-        let (sch, h, m) = (prob.scheme, prob.h, prob.cons);
-        let s = sch.stages();
-        let nz = (s - 1) * N;
-        let zs = self.z.as_slice();
-        let mut ptil = prob.p0;
-        for (i, g) in prob.grads.iter().enumerate() {
-            ptil += g.fq * (h * sch.b()[i]);
+        let model = prob.model;
+        let kernel =
+            |t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>| model.node_jacobian_at(t, q, v);
+        let step = (prob.scheme, prob.h, prob.t0, &prob.p0);
+        let nodes = (&prob.grads[..], &prob.gjac[..], &prob.xs[..], &prob.vs[..]);
+        let out = (&mut self.impulse, &mut self.mu[..]);
+        project::<N>(step, nodes, prob.cons, self.z.as_slice(), &kernel, out)
+    }
+}
+
+/// A model's node kernel `(t, q, v) ↦` its [`NodeJacobian`].
+type NodeKernel<'a, const N: usize> =
+    dyn Fn(f64, &SVector<f64, N>, &SVector<f64, N>) -> NodeJacobian<N> + 'a;
+
+/// The node values a projection reads: gradients, `G(x_j)`, `x_j`, `v_j`.
+type ProjectNodes<'a, const N: usize> = (
+    &'a [NodeGradient<N>],
+    &'a [DMatrix<f64>],
+    &'a [SVector<f64, N>],
+    &'a [SVector<f64, N>],
+);
+
+/// `DenseBackend::project` for a step `(scheme, h, t0, p0)` with the node values `(grads,
+/// G(x_j), x_j, v_j)` of its solution `zs`, `m` constraints and the model's node kernel
+/// `kernel`; writes the impulse and the end multipliers to `out`. Generic over the number
+/// of coordinates only: one copy serves every model of `N` coordinates.
+fn project<const N: usize>(
+    (sch, h, t0, p0): (&Scheme, f64, f64, &SVector<f64, N>),
+    (grads, gjac, xs, vs): ProjectNodes<'_, N>,
+    m: usize,
+    zs: &[f64],
+    kernel: &NodeKernel<'_, N>,
+    (impulse, mu_out): (&mut Vec<f64>, &mut [f64]),
+) -> Result<(), StepFailure> {
+    let s = sch.stages();
+    let nz = (s - 1) * N;
+    let mut ptil = *p0;
+    for (i, g) in grads.iter().enumerate() {
+        ptil += g.fq * (h * sch.b()[i]);
+    }
+    let mut imp = SVector::<f64, N>::zeros();
+    for j in 0..s - 1 {
+        let lam = &zs[nz + j * m..nz + (j + 1) * m];
+        let gj = &gjac[j];
+        // `z` holds `ŵ_j = h² λ_j` (see `StepProblem`).
+        for a in 0..N {
+            imp[a] += sch.b()[j] / h * (0..m).map(|k| gj[(k, a)] * lam[k]).sum::<f64>();
         }
-        let mut imp = SVector::<f64, N>::zeros();
-        for j in 0..s - 1 {
-            let lam = &zs[nz + j * m..nz + (j + 1) * m];
-            let gj = &prob.gjac[j];
-            // `z` holds `ŵ_j = h² λ_j` (see `StepProblem`).
-            for a in 0..N {
-                imp[a] += sch.b()[j] / h * (0..m).map(|k| gj[(k, a)] * lam[k]).sum::<f64>();
-            }
-        }
-        ptil -= imp;
-        let g1 = &prob.gjac[s - 1];
-        let (t1, q1) = (prob.t0 + h, prob.xs[s - 1]);
-        let mut v = prob.vs[s - 1];
-        let mut mu = DVector::<f64>::zeros(m);
-        let mut kkt = DMatrix::<f64>::zeros(N + m, N + m);
-        let mut rhs = DVector::<f64>::zeros(N + m);
-        let mut converged = false;
-        for it in 0..30 {
-            let nj = prob.model.node_jacobian_at(t1, &q1, &v);
-            let mut size = (0.0f64, 0.0f64);
-            for a in 0..N {
-                // `mu` is the impulse `h b_{s−1} μ`, so that the matrix is well scaled for
-                // any step size.
-                let gt_mu: f64 = (0..m).map(|k| g1[(k, a)] * mu[k]).sum();
-                rhs[a] = -(nj.grad.lv[a] + gt_mu - ptil[a]);
-                size.0 = size
-                    .0
-                    .max(nj.grad.lv[a].abs() + gt_mu.abs() + ptil[a].abs());
-                for b in 0..N {
-                    kkt[(a, b)] = nj.e[(a, b)];
-                }
-                for k in 0..m {
-                    kkt[(a, N + k)] = g1[(k, a)];
-                    kkt[(N + k, a)] = g1[(k, a)];
-                }
+    }
+    ptil -= imp;
+    let g1 = &gjac[s - 1];
+    let (t1, q1) = (t0 + h, xs[s - 1]);
+    let mut v = vs[s - 1];
+    let mut mu = DVector::<f64>::zeros(m);
+    let mut kkt = DMatrix::<f64>::zeros(N + m, N + m);
+    let mut rhs = DVector::<f64>::zeros(N + m);
+    let mut converged = false;
+    for it in 0..30 {
+        let nj = kernel(t1, &q1, &v);
+        let mut size = (0.0f64, 0.0f64);
+        for a in 0..N {
+            // `mu` is the impulse `h b_{s−1} μ`, so that the matrix is well scaled for
+            // any step size.
+            let gt_mu: f64 = (0..m).map(|k| g1[(k, a)] * mu[k]).sum();
+            rhs[a] = -(nj.grad.lv[a] + gt_mu - ptil[a]);
+            size.0 = size
+                .0
+                .max(nj.grad.lv[a].abs() + gt_mu.abs() + ptil[a].abs());
+            for b in 0..N {
+                kkt[(a, b)] = nj.e[(a, b)];
             }
             for k in 0..m {
-                rhs[N + k] = -(0..N).map(|a| g1[(k, a)] * v[a]).sum::<f64>();
-                size.1 = size
-                    .1
-                    .max((0..N).map(|a| (g1[(k, a)] * v[a]).abs()).sum::<f64>());
-            }
-            // Converged when both residuals are at the round-off of their terms.
-            let noise = 16.0 * f64::EPSILON * (N + m) as f64;
-            let (r1, r2) = (rhs.rows(0, N).amax(), rhs.rows(N, m).amax());
-            if it > 0 && r1 <= noise * size.0 && r2 <= noise * size.1.max(f64::MIN_POSITIVE) {
-                converged = true;
-                break;
-            }
-            let Some(d) = kkt.clone().lu().solve(&rhs) else {
-                return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
-            };
-            if !d.iter().all(|x| x.is_finite()) {
-                return Err(StepFailure::Newton(NewtonFailure::NonFinite));
-            }
-            for a in 0..N {
-                v[a] += d[a];
-            }
-            for k in 0..m {
-                mu[k] += d[N + k];
+                kkt[(a, N + k)] = g1[(k, a)];
+                kkt[(N + k, a)] = g1[(k, a)];
             }
         }
-        if !converged {
-            return Err(StepFailure::Newton(NewtonFailure::MaxIterations {
-                residual: rhs.amax(),
-            }));
+        for k in 0..m {
+            rhs[N + k] = -(0..N).map(|a| g1[(k, a)] * v[a]).sum::<f64>();
+            size.1 = size
+                .1
+                .max((0..N).map(|a| (g1[(k, a)] * v[a]).abs()).sum::<f64>());
+        }
+        // Converged when both residuals are at the round-off of their terms.
+        let noise = 16.0 * f64::EPSILON * (N + m) as f64;
+        let (r1, r2) = (rhs.rows(0, N).amax(), rhs.rows(N, m).amax());
+        if it > 0 && r1 <= noise * size.0 && r2 <= noise * size.1.max(f64::MIN_POSITIVE) {
+            converged = true;
+            break;
+        }
+        let Some(d) = kkt.clone().lu().solve(&rhs) else {
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+        };
+        if !d.iter().all(|x| x.is_finite()) {
+            return Err(StepFailure::Newton(NewtonFailure::NonFinite));
         }
         for a in 0..N {
-            imp[a] += (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
+            v[a] += d[a];
         }
-        self.impulse.clear();
-        self.impulse.extend_from_slice(imp.as_slice());
-        // In the units of the step's unknowns: `ŵ = h² λ = h (c μ) / b_{s−1}`.
-        for (w, x) in self.mu.iter_mut().zip(mu.iter()) {
-            *w = h * x / sch.b()[s - 1];
+        for k in 0..m {
+            mu[k] += d[N + k];
         }
-        Ok(())
     }
+    if !converged {
+        return Err(StepFailure::Newton(NewtonFailure::MaxIterations {
+            residual: rhs.amax(),
+        }));
+    }
+    for a in 0..N {
+        imp[a] += (0..m).map(|k| g1[(k, a)] * mu[k]).sum::<f64>();
+    }
+    impulse.clear();
+    impulse.extend_from_slice(imp.as_slice());
+    // In the units of the step's unknowns: `ŵ = h² λ = h (c μ) / b_{s−1}`.
+    for (w, x) in mu_out.iter_mut().zip(mu.iter()) {
+        *w = h * x / sch.b()[s - 1];
+    }
+    Ok(())
 }
 
 /// `x` as a vector of the model's size (a caller's slice always has `N` entries).

@@ -278,7 +278,26 @@ macro_rules! forward {
     };
 }
 
+/// A backend's last step as the stepper's code that is not generic over the model reads
+/// it: the scheme, the layout of the unknowns and the unknowns, in one call.
+#[derive(Clone, Copy)]
+pub(crate) struct StepView<'a> {
+    pub(crate) scheme: &'a Scheme,
+    pub(crate) layout: Layout,
+    pub(crate) z: &'a [f64],
+}
+
 impl<M: ForcedLagrangian<N>, const N: usize> Backend<'_, M, N> {
+    /// The scheme, the layout and the unknowns ([`StepView`]).
+    #[inline(always)]
+    pub(crate) fn view(&self) -> StepView<'_> {
+        forward!(self, b => StepView {
+            scheme: b.scheme(),
+            layout: b.layout(),
+            z: b.z(),
+        })
+    }
+
     /// Gives the next [`StepBackend::solve`] node blocks interpolated from those of `from`'s
     /// last Jacobian (see [`DenseBackend::seed_node_blocks`]); false, and nothing given, where
     /// the backend evaluates its own (the sparse one).

@@ -157,45 +157,56 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         } else {
             NodeRef::Borrowed(node)
         };
-        // The pattern at the initial state (at `v = 0` for initial momenta).
-        let q = match init {
-            InitialState::Velocity { q, .. } | InitialState::Momentum { q, .. } => q,
-        };
-        let mut pattern = match init {
-            InitialState::Velocity { q, v } => record_node_pattern(node.get(), 0.0, q, v)?,
-            InitialState::Momentum { q, .. } => {
-                record_node_pattern(node.get(), 0.0, q, &vec![0.0; N])?
-            }
-        };
-        // The constraints' curvature adds to the diagonal node blocks: its entries join the
-        // node pattern.
-        let g_pattern = if cons > 0 {
-            let (g, curvature) = record_constraint_patterns(node.get(), 0.0, q)?;
-            let pairs = pattern.entries().chain(curvature).collect();
-            pattern = NodePattern::from_pairs(N, pairs);
-            Some(g)
-        } else {
-            None
-        };
-        let fill = pattern.nnz() as f64 / (N as f64 * N as f64);
-        match self.linear_path {
-            LinearPath::Auto if fill > LinearPath::SPARSE_MAX_DENSITY => return Ok(None),
-            LinearPath::Sparse
-                if N >= LinearPath::SPARSE_MIN_DOF
-                    && fill > LinearPath::SPARSE_FORCED_MAX_DENSITY =>
-            {
-                return Err(Error::PatternTooDense {
-                    nnz: pattern.nnz(),
-                    n: N,
-                    fill,
-                    max: LinearPath::SPARSE_FORCED_MAX_DENSITY,
-                });
-            }
-            _ => {}
-        }
         let constant_mass = M::STRUCTURE.constant_mass;
-        SparseBackend::new(node, scheme, (pattern, g_pattern), newton, constant_mass).map(Some)
+        let path = (self.linear_path, constant_mass);
+        sparse_backend_on(node, init.as_slices(), cons, scheme, newton, path)
     }
+}
+
+/// The sparse backend on the node kernels `node` if the run takes it: the pattern at the
+/// initial state `(q, v)` (`v = None` for initial momenta: the pattern at `v = 0`), with
+/// `cons` constraints, against the density limits of `path = (linear path, constant mass)`.
+/// Not generic over the model: one copy serves every model.
+#[cfg(feature = "sparse")]
+fn sparse_backend_on<'s>(
+    node: NodeRef<'s>,
+    (q, v): (&[f64], Option<&[f64]>),
+    cons: usize,
+    scheme: &'s Scheme,
+    newton: NewtonOptions,
+    (linear_path, constant_mass): (LinearPath, bool),
+) -> Result<Option<SparseBackend<'s>>, Error> {
+    let n = q.len();
+    let mut pattern = match v {
+        Some(v) => record_node_pattern(node.get(), 0.0, q, v)?,
+        None => record_node_pattern(node.get(), 0.0, q, &vec![0.0; n])?,
+    };
+    // The constraints' curvature adds to the diagonal node blocks: its entries join the
+    // node pattern.
+    let g_pattern = if cons > 0 {
+        let (g, curvature) = record_constraint_patterns(node.get(), 0.0, q)?;
+        let pairs = pattern.entries().chain(curvature).collect();
+        pattern = NodePattern::from_pairs(n, pairs);
+        Some(g)
+    } else {
+        None
+    };
+    let fill = pattern.nnz() as f64 / (n as f64 * n as f64);
+    match linear_path {
+        LinearPath::Auto if fill > LinearPath::SPARSE_MAX_DENSITY => return Ok(None),
+        LinearPath::Sparse
+            if n >= LinearPath::SPARSE_MIN_DOF && fill > LinearPath::SPARSE_FORCED_MAX_DENSITY =>
+        {
+            return Err(Error::PatternTooDense {
+                nnz: pattern.nnz(),
+                n,
+                fill,
+                max: LinearPath::SPARSE_FORCED_MAX_DENSITY,
+            });
+        }
+        _ => {}
+    }
+    SparseBackend::new(node, scheme, (pattern, g_pattern), newton, constant_mass).map(Some)
 }
 
 /// Refuses a model too large for the dense backend: more than

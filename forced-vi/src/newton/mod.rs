@@ -172,7 +172,8 @@ impl Newton {
         z: &DVector<f64>,
     ) -> Result<(), NewtonFailure> {
         self.iteration.have_factors = false;
-        LinearSolver::<S>::refresh(&mut self.linear, sys, z).map(|_| ())
+        let sys: &mut dyn NonlinearSystem = sys;
+        LinearSolver::<dyn NonlinearSystem>::refresh(&mut self.linear, sys, z).map(|_| ())
     }
 
     /// The Jacobian of the last [`Newton::factor_at`] or refresh.
@@ -207,6 +208,17 @@ impl Newton {
     pub fn solve<S: NonlinearSystem>(
         &mut self,
         sys: &mut S,
+        z: &mut DVector<f64>,
+        residual_scale: f64,
+    ) -> Result<NewtonReport, NewtonFailure> {
+        self.solve_dyn(sys, z, residual_scale)
+    }
+
+    /// [`Newton::solve`] behind a trait object: the iteration is compiled once, not once
+    /// per model (a residual or a Jacobian costs far more than the indirect call).
+    fn solve_dyn(
+        &mut self,
+        sys: &mut dyn NonlinearSystem,
         z: &mut DVector<f64>,
         residual_scale: f64,
     ) -> Result<NewtonReport, NewtonFailure> {

@@ -4,7 +4,10 @@
 
 use super::Stepper;
 use super::checks::step_count;
-use crate::backend::{StepBackend, StepFailure};
+use crate::backend::{Layout, StepBackend, StepFailure, StepView};
+
+/// The views of a step and of its reference.
+type StepViews<'a> = (StepView<'a>, StepView<'a>);
 use crate::control::{BAND, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
@@ -114,10 +117,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let Some(reference) = self.reference.as_mut() else {
             return Ok(0.0);
         };
-        let s1 = self.scheme.stages() - 1;
-        let lay = self.backend.layout();
-        let z = self.backend.z();
-        let (lay_r, r1) = (reference.layout(), reference.scheme().stages() - 1);
         let cons = self.model.constraint_count();
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -125,93 +124,36 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         // Twice at most: with the factors of the last estimate, where they still serve,
         // and with fresh ones if the error they leave is not well below the tolerance.
         for fresh in [false, true] {
-            let zr = reference.z_mut();
-            for j in 1..=r1 {
-                let row = &self.lift[(j - 1) * s1..j * s1];
-                for a in 0..N {
-                    zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
-                }
-            }
-            // A constrained model: the multipliers, interpolated in time from the step's
-            // (`λ_0 … λ_{s−2}` in `z`, `λ_{s−1}` at its end) to the reference's control
-            // points.
-            if cons > 0 {
-                let mu = self.backend.end_multipliers();
-                let s = s1 + 1;
-                for j in 0..r1 {
-                    let row = &self.lift_lambda[j * s..(j + 1) * s];
-                    for k in 0..cons {
-                        let at = |m: usize| {
-                            if m + 1 < s {
-                                z[lay.multiplier(m, k)]
-                            } else {
-                                mu.get(k).copied().unwrap_or(0.0)
-                            }
-                        };
-                        zr[lay_r.multiplier(j, k)] = (0..s).map(|m| row[m] * at(m)).sum();
-                    }
-                }
-            }
+            let lifts = (self.lift, self.lift_lambda);
+            let mu = if cons > 0 {
+                self.backend.end_multipliers()
+            } else {
+                &[]
+            };
+            let (lay_r, r1) = (reference.layout(), reference.scheme().stages() - 1);
+            let to = (lay_r, r1, reference.z_mut());
+            lift_step::<N>(self.backend.view(), mu, to, lifts, cons);
             // Fresh factors take the step's node blocks (see `crate::control`).
             let carried = !fresh && reference.carry_factors(h);
             if !carried && !self.block_weights.is_empty() {
                 reference.seed_node_blocks(&self.backend, self.block_weights);
             }
-            match reference.solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale) {
-                Ok(rep) => *iters += rep.iterations,
-                // One iteration is what the estimate asks for (its options cap it there).
-                Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
-                    *iters += reference.last_iterations()
-                }
-                Err(f) => {
-                    *iters += reference.last_iterations();
-                    return Err(f);
-                }
+            let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
+            let start = (st.t_state, &st.q.sum[..], &st.p.sum[..]);
+            let solve = (h, scale, per_unit);
+            if solve_reference(reference, start, solve, (tol, now), &mut self.err, iters)? {
+                break;
             }
-            // The carried factors' error, as an error in every position and momentum: at
-            // most a tenth of the tolerance, or the estimate is made again with fresh
-            // factors.
-            let left = reference.carried_error();
-            if left > 0.0 {
-                self.err.0.fill(left);
-                self.err.1.fill(left);
-                let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
-                if tol.error_norm(per_unit, (&self.err.0, &self.err.1), now) > 0.1 {
-                    reference.reject_carry();
-                    continue;
-                }
-            }
-            break;
         }
-        let zr = reference.z();
-        let (eq, ep) = (&mut self.err.0, &mut self.err.1);
-        // Each difference less the round-off of the sums it compares (4ε of their terms'
-        // sizes): noise that smaller steps do not reduce must not count as error per unit
-        // step, or the step size would shrink without end.
-        let noise = 4.0 * f64::EPSILON;
-        for a in 0..N {
-            let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
-            eq[a] = ((x - y).abs() - noise * (x.abs() + y.abs())).max(0.0);
-        }
-        let (b, rs) = (self.scheme.b(), reference.scheme());
-        for (a, e) in ep.iter_mut().enumerate() {
-            let (mut d, mut size) = (self.dp[a], 0.0);
-            for (i, &bi) in b.iter().enumerate() {
-                size += (h * bi * self.backend.node_fq(i)[a]).abs();
-            }
-            for (i, &bi) in rs.b().iter().enumerate() {
-                let t = h * bi * reference.node_fq(i)[a];
-                d -= t;
-                size += t.abs();
-            }
-            if let Some(imp) = reference.constraint_impulse() {
-                d += imp[a];
-                size += imp[a].abs();
-            }
-            *e = (d.abs() - noise * size).max(0.0);
-        }
-        let st = &self.state;
-        Ok(tol.error_norm(per_unit, (eq, ep), (&st.q.sum, &st.p.sum)))
+        let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
+        let lhs = (&self.dp[..], h, per_unit);
+        let views = (self.backend.view(), reference.view());
+        let (backend, reference) = (&self.backend, &*reference);
+        let steps = (
+            views,
+            (backend as &dyn StepBackend, reference as &dyn StepBackend),
+        );
+        Ok(local_error(steps, lhs, (tol, now), &mut self.err))
     }
 
     /// The first step of an adaptive run, from the initial data (Hairer, Nørsett & Wanner,
@@ -223,59 +165,202 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             return Ok(());
         };
         let span = self.t_final;
-        let (n, p) = (N, self.scheme.order() as f64);
-        let st = &self.state;
-        let (q0, p0, v0) = (st.q.sum.clone(), st.p.sum.clone(), st.v.clone());
-        let w = |i: usize, y: f64| tol.atol[i] + tol.rtol[i] * y.abs();
-        let rms = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
-            let sum: f64 = (0..n)
-                .map(|i| (a(i) / w(i, q0[i])).powi(2) + (b(i) / w(i, p0[i])).powi(2))
-                .sum();
-            (sum / (2 * n).max(1) as f64).sqrt()
-        };
-        let (mut fq0, mut lv) = (vec![0.0; n], vec![0.0; n]);
-        self.backend.gradient((0.0, &q0, &v0), &mut fq0, &mut lv)?;
-        let d0 = rms(&|i| q0[i], &|i| p0[i]);
-        let d1 = rms(&|i| v0[i], &|i| fq0[i]);
-        let cap = span.min(self.options.max_step);
-        let h0 = if d0 < 1e-5 || d1 < 1e-5 {
-            1e-6
-        } else {
-            0.01 * d0 / d1
-        }
-        .min(cap);
-        // One explicit Euler step of h₀: the derivative's rate of change.
-        let q1: Vec<f64> = (0..n).map(|i| q0[i] + h0 * v0[i]).collect();
-        let p1: Vec<f64> = (0..n).map(|i| p0[i] + h0 * fq0[i]).collect();
-        let mut v1 = v0.clone();
-        let mut fq1 = vec![0.0; n];
-        let probe = self
-            .backend
-            .velocity((h0, &q1, &p1), &mut v1, 0)
-            .and_then(|()| self.backend.gradient((h0, &q1, &v1), &mut fq1, &mut lv));
-        let h = match probe {
-            Ok(()) => {
-                let d2 = rms(&|i| v1[i] - v0[i], &|i| fq1[i] - fq0[i]) / h0;
-                let dmax = d1.max(d2);
-                let h1 = if dmax <= 1e-15 {
-                    (h0 * 1e-3).max(1e-6)
-                } else {
-                    (0.01 / dmax).powf(1.0 / (p + 1.0))
-                };
-                (100.0 * h0).min(h1)
-            }
-            // The probe left the model's domain: start from h₀ and let the controller go on.
-            Err(_) => h0,
-        }
-        .min(cap)
-        .max(self.options.min_step);
-        if !(h.is_finite() && h > 16.0 * f64::EPSILON * span) {
-            return Err(Error::StepSizeTooSmall { t: 0.0, h });
-        }
+        let bounds = (self.options.min_step, self.options.max_step);
+        let order = self.scheme.order() as f64;
+        let tol = (&tol.rtol[..], &tol.atol[..]);
+        let h = first_step(&mut self.backend, &self.state, tol, span, bounds, order)?;
         self.h = h;
         self.h_next = h;
         self.state.h_prev = h;
         self.n_steps = step_count(span, h, usize::MAX)?;
         Ok(())
     }
+}
+
+/// [`Stepper::choose_first_step`]'s step from the initial state `st`, for a run over
+/// `span` with step bounds `(min_step, max_step)` and a scheme of order `p`.
+fn first_step(
+    backend: &mut dyn StepBackend,
+    st: &super::state::State,
+    (rtol, atol): (&[f64], &[f64]),
+    span: f64,
+    (min_step, max_step): (f64, f64),
+    p: f64,
+) -> Result<f64, Error> {
+    let n = st.v.len();
+    let (q0, p0, v0) = (&st.q.sum, &st.p.sum, &st.v);
+    let w = |i: usize, y: f64| atol[i] + rtol[i] * y.abs();
+    let rms = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
+        let sum: f64 = (0..n)
+            .map(|i| (a(i) / w(i, q0[i])).powi(2) + (b(i) / w(i, p0[i])).powi(2))
+            .sum();
+        (sum / (2 * n).max(1) as f64).sqrt()
+    };
+    let (mut fq0, mut lv) = (vec![0.0; n], vec![0.0; n]);
+    backend.gradient((0.0, q0, v0), &mut fq0, &mut lv)?;
+    let d0 = rms(&|i| q0[i], &|i| p0[i]);
+    let d1 = rms(&|i| v0[i], &|i| fq0[i]);
+    let cap = span.min(max_step);
+    let h0 = if d0 < 1e-5 || d1 < 1e-5 {
+        1e-6
+    } else {
+        0.01 * d0 / d1
+    }
+    .min(cap);
+    // One explicit Euler step of h₀: the derivative's rate of change.
+    let q1: Vec<f64> = (0..n).map(|i| q0[i] + h0 * v0[i]).collect();
+    let p1: Vec<f64> = (0..n).map(|i| p0[i] + h0 * fq0[i]).collect();
+    let mut v1 = v0.clone();
+    let mut fq1 = vec![0.0; n];
+    let probe = backend
+        .velocity((h0, &q1, &p1), &mut v1, 0)
+        .and_then(|()| backend.gradient((h0, &q1, &v1), &mut fq1, &mut lv));
+    let h = match probe {
+        Ok(()) => {
+            let d2 = rms(&|i| v1[i] - v0[i], &|i| fq1[i] - fq0[i]) / h0;
+            let dmax = d1.max(d2);
+            let h1 = if dmax <= 1e-15 {
+                (h0 * 1e-3).max(1e-6)
+            } else {
+                (0.01 / dmax).powf(1.0 / (p + 1.0))
+            };
+            (100.0 * h0).min(h1)
+        }
+        // The probe left the model's domain: start from h₀ and let the controller go on.
+        Err(_) => h0,
+    }
+    .min(cap)
+    .max(min_step);
+    if !(h.is_finite() && h > 16.0 * f64::EPSILON * span) {
+        return Err(Error::StepSizeTooSmall { t: 0.0, h });
+    }
+    Ok(h)
+}
+
+/// Lifts the step polynomial of the step in `from` to the control points of the reference
+/// scheme, into `(lay_r, r1, zr)` (its layout, its stages less one, its unknowns): the
+/// increments by `lift` (row `j − 1`: `ℓ_m(d'_j)`) and, for a constrained model, the
+/// multipliers by `lift_lambda`, with `mu` those at the step's end.
+#[inline(always)]
+fn lift_step<const N: usize>(
+    from: StepView<'_>,
+    mu: &[f64],
+    (lay_r, r1, zr): (Layout, usize, &mut [f64]),
+    (lift, lift_lambda): (&[f64], &[f64]),
+    cons: usize,
+) {
+    let (s1, lay, z) = (from.scheme.stages() - 1, from.layout, from.z);
+    for j in 1..=r1 {
+        let row = &lift[(j - 1) * s1..j * s1];
+        for a in 0..N {
+            zr[lay_r.at(j, a)] = (1..=s1).map(|m| row[m - 1] * z[lay.at(m, a)]).sum();
+        }
+    }
+    // A constrained model: the multipliers, interpolated in time from the step's
+    // (`λ_0 … λ_{s−2}` in `z`, `λ_{s−1}` at its end) to the reference's control points.
+    if cons > 0 {
+        let s = s1 + 1;
+        for j in 0..r1 {
+            let row = &lift_lambda[j * s..(j + 1) * s];
+            for k in 0..cons {
+                let at = |m: usize| {
+                    if m + 1 < s {
+                        z[lay.multiplier(m, k)]
+                    } else {
+                        mu.get(k).copied().unwrap_or(0.0)
+                    }
+                };
+                zr[lay_r.multiplier(j, k)] = (0..s).map(|m| row[m] * at(m)).sum();
+            }
+        }
+    }
+}
+
+/// The reference's solve (one iteration) from `start = (t0, q0, p0)`, `solve = (h, scale,
+/// per_unit)`; counts its iterations in `iters`. Returns false if the factors it carried
+/// left an error above a tenth of the tolerance at the step's end `now` (they are then
+/// refused, and the estimate must be made again); `err` is scratch.
+fn solve_reference<const N: usize>(
+    reference: &mut dyn StepBackend,
+    (t0, q0, p0): (f64, &[f64], &[f64]),
+    (h, scale, per_unit): (f64, f64, f64),
+    (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
+    err: &mut (Vec<f64>, Vec<f64>),
+    iters: &mut usize,
+) -> Result<bool, StepFailure> {
+    match reference.solve(h, t0, (q0, p0), scale) {
+        Ok(rep) => *iters += rep.iterations,
+        // One iteration is what the estimate asks for (its options cap it there).
+        Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
+            *iters += reference.last_iterations()
+        }
+        Err(f) => {
+            *iters += reference.last_iterations();
+            return Err(f);
+        }
+    }
+    // The carried factors' error, as an error in every position and momentum: at most a
+    // tenth of the tolerance, or the estimate is made again with fresh factors.
+    let left = reference.carried_error();
+    if left > 0.0 {
+        err.0.fill(left);
+        err.1.fill(left);
+        if tol.error_norm(per_unit, (&err.0, &err.1), now) > 0.1 {
+            reference.reject_carry();
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+/// The weighted norm, per unit step, of the difference between the step in `backend` and
+/// the reference's in `reference`, at their ends in `(q, p)`; `dp` is the step's momentum
+/// update and `err` is scratch for the difference.
+#[inline(always)]
+fn local_error<const N: usize>(
+    ((view, view_r), (backend, reference)): (StepViews<'_>, (&dyn StepBackend, &dyn StepBackend)),
+    (dp, h, per_unit): (&[f64], f64, f64),
+    (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
+    err: &mut (Vec<f64>, Vec<f64>),
+) -> f64 {
+    let (s1, lay, z) = (view.scheme.stages() - 1, view.layout, view.z);
+    let (r1, lay_r, zr) = (view_r.scheme.stages() - 1, view_r.layout, view_r.z);
+    let (eq, ep) = (&mut err.0[..N], &mut err.1[..N]);
+    // Each difference less the round-off of the sums it compares (4ε of their terms'
+    // sizes): noise that smaller steps do not reduce must not count as error per unit
+    // step, or the step size would shrink without end.
+    let noise = 4.0 * f64::EPSILON;
+    // The momenta: `dp` less the reference's `h Σ_i b_i (L_q + F)_i`, less its constraint
+    // impulse, and the sizes of the terms (in `eq` until the positions are compared), node
+    // by node.
+    let (b, rs) = (view.scheme.b(), view_r.scheme);
+    ep.copy_from_slice(&dp[..N]);
+    eq.fill(0.0);
+    for (i, &bi) in b.iter().enumerate() {
+        for (size, f) in eq.iter_mut().zip(backend.node_fq(i)) {
+            *size += (h * bi * f).abs();
+        }
+    }
+    for (i, &bi) in rs.b().iter().enumerate() {
+        let fq = reference.node_fq(i);
+        for ((d, size), f) in ep.iter_mut().zip(eq.iter_mut()).zip(fq) {
+            let t = h * bi * f;
+            *d -= t;
+            *size += t.abs();
+        }
+    }
+    if let Some(imp) = reference.constraint_impulse() {
+        for ((d, size), i) in ep.iter_mut().zip(eq.iter_mut()).zip(imp) {
+            *d += i;
+            *size += i.abs();
+        }
+    }
+    for (d, size) in ep.iter_mut().zip(eq.iter()) {
+        *d = (d.abs() - noise * size).max(0.0);
+    }
+    for (a, e) in eq.iter_mut().enumerate() {
+        let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
+        *e = ((x - y).abs() - noise * (x.abs() + y.abs())).max(0.0);
+    }
+    tol.error_norm(per_unit, (eq, ep), now)
 }

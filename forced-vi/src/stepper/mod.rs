@@ -4,6 +4,20 @@
 //! trustworthy. What differs between a small and a large model is the backend's linear
 //! algebra; everything here is written once, over slices.
 //!
+//! **What each model compiles.** The stepper is generic over the model, so every model type
+//! gets its own copy of what is generic, compiled by LLVM at each user's build. The work that
+//! does not call the model's kernels is therefore kept out of the generic code: the Newton
+//! iteration runs on a `dyn NonlinearSystem`, and the initial state of a run, the first step, the
+//! error estimate's lift and comparison, the tangent's propagation, the sparse backend's set-up
+//! and a constrained step's projection are functions over slices and `dyn StepBackend`
+//! (one copy for every model) or generic over the number of coordinates only (one copy per
+//! `N`). Where the indirection showed in a small model's step (the predictor, the update)
+//! the code stays generic. Measured (`cargo llvm-lines`, the test binary `models_suite` of
+//! 43 models run end to end): 3.00M lines of LLVM IR before, 2.78M after (−7.6 %); the
+//! report's library, 39 models: 2.61M before, 2.42M after (−7.4 %). The cost
+//! in instructions (callgrind, coupled van der Pol): +0.5 % for fixed lobatto3 steps (the
+//! Newton solve's indirect calls) and +0.5 to +1.1 % for adaptive runs.
+//!
 //! | piece | module |
 //! |---|---|
 //! | the [`Stepper`] type, its records, its iterator, its stack guard; [`StepOptions`] | this one |

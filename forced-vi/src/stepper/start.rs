@@ -77,7 +77,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             None => step_count(t_final, h, options.max_steps)?,
         };
         let mut state = State::new(N, backend.z().len());
-        let mass_sign = initial_state(&mut backend, &mut state, init)?;
+        let mass_sign = initial_state(&mut backend, &mut state, init.parts())?;
         if model.constraint_count() > 0 {
             let at = (0.0, &state.q.sum[..], &state.v[..]);
             let residuals = backend.constraint_residuals(at)?;
@@ -137,34 +137,34 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
 
 /// Checks the initial data and fills `(q, v, p)` of `state` from it: `p_0 = L_v(q_0, v_0)`
 /// from an initial velocity, `v_0` by the velocity solve from an initial momentum; and the
-/// force scale `|L_q + F|` at the start. Returns the sign of the mass matrix's determinant.
-fn initial_state<B: StepBackend, const N: usize>(
-    backend: &mut B,
+/// force scale `|L_q + F|` at the start; `(q, w, from_velocity)` is the initial data, `w`
+/// the velocity or the momentum. Returns the sign of the mass matrix's determinant. Not
+/// generic: one copy serves every model.
+fn initial_state(
+    backend: &mut dyn StepBackend,
     state: &mut State,
-    init: InitialState<N>,
+    (q, w, from_velocity): (&[f64], &[f64], bool),
 ) -> Result<f64, Error> {
+    let n = q.len();
     let (q0, p0, v0) = (&mut state.q.sum, &mut state.p.sum, &mut state.v);
-    let mut fq = vec![0.0; N];
-    let sign = match init {
-        InitialState::Velocity { q, v } => {
-            check_finite("q", &q)?;
-            check_finite("v", &v)?;
-            q0.copy_from_slice(&q);
-            v0.copy_from_slice(&v);
-            backend.gradient((0.0, q0, v0), &mut fq, p0)?;
-            backend.mass_sign((0.0, q0, v0))?
-        }
-        InitialState::Momentum { q, p } => {
-            check_finite("q", &q)?;
-            check_finite("p", &p)?;
-            q0.copy_from_slice(&q);
-            p0.copy_from_slice(&p);
-            backend.velocity((0.0, q0, p0), v0, 0)?;
-            let sign = backend.mass_sign((0.0, q0, v0))?;
-            let mut lv = vec![0.0; N];
-            backend.gradient((0.0, q0, v0), &mut fq, &mut lv)?;
-            sign
-        }
+    let mut fq = vec![0.0; n];
+    let sign = if from_velocity {
+        check_finite("q", q)?;
+        check_finite("v", w)?;
+        q0.copy_from_slice(q);
+        v0.copy_from_slice(w);
+        backend.gradient((0.0, q0, v0), &mut fq, p0)?;
+        backend.mass_sign((0.0, q0, v0))?
+    } else {
+        check_finite("q", q)?;
+        check_finite("p", w)?;
+        q0.copy_from_slice(q);
+        p0.copy_from_slice(w);
+        backend.velocity((0.0, q0, p0), v0, 0)?;
+        let sign = backend.mass_sign((0.0, q0, v0))?;
+        let mut lv = vec![0.0; n];
+        backend.gradient((0.0, q0, v0), &mut fq, &mut lv)?;
+        sign
     };
     state.scale_f = fq.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     Ok(sign)

@@ -116,9 +116,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let backend = &mut self.backend;
         backend.linearize()?;
         let sch = self.scheme;
-        let (s, h) = (sch.stages(), self.state.h_prev);
-        let lay = backend.layout();
-        let cols = tg.columns(N);
+        let h = self.state.h_prev;
         let np = tg.theta.len();
         // The parameters' terms at the nodes of the solution.
         let t0 = self.state.t_state - h;
@@ -134,31 +132,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 tg.pnode[o + N..o + 2 * N].copy_from_slice(g.lv.as_slice());
             }
         }
-        for c in 0..cols {
-            let col = c * 2 * N;
-            for m in 0..s {
-                tg.dx[m * N..(m + 1) * N].copy_from_slice(&tg.m[col..col + N]);
-            }
-            let param = (c >= 2 * N).then(|| (&tg.pnode[..], c - 2 * N, np));
-            linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
-            for j in 0..s - 1 {
-                for a in 0..N {
-                    let dp = if j == 0 { tg.m[col + N + a] } else { 0.0 };
-                    tg.rhs[lay.at(j + 1, a)] = -(tg.g[j * N + a] + dp);
-                }
-            }
-            backend.solve_linearized(&mut tg.rhs);
-            for m in 1..s {
-                for a in 0..N {
-                    tg.dx[m * N + a] = tg.m[col + a] + tg.rhs[lay.at(m, a)];
-                }
-            }
-            linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
-            for a in 0..N {
-                tg.m[col + a] = tg.dx[(s - 1) * N + a];
-                tg.m[col + N + a] = tg.g[(s - 1) * N + a];
-            }
-        }
+        propagate(backend, tg, h, N);
         Ok(())
     }
 
@@ -216,8 +190,8 @@ fn check_parameter_gradient<const N: usize>(g: &NodeGradient<N>, t: f64) -> Resu
 /// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx` (`s` blocks of `N`, block 0
 /// the start), with the node blocks of the last [`StepBackend::linearize`]; with `param =
 /// (pnode, k, P)`, plus the terms of a unit change of parameter `θ_k`.
-fn linearized_gradients<B: StepBackend>(
-    backend: &B,
+fn linearized_gradients(
+    backend: &dyn StepBackend,
     h: f64,
     dx: &[f64],
     param: Option<(&[f64], usize, usize)>,
@@ -251,6 +225,40 @@ fn linearized_gradients<B: StepBackend>(
             for a in 0..n {
                 g[j * n + a] += cf * dfq[a] + cl * dlv[a];
             }
+        }
+    }
+}
+
+/// Carries the columns of `tg` through the step of size `h` that `backend` holds,
+/// linearised, for a model of `n` coordinates (see the module's docs). Not generic: one
+/// copy serves every model.
+fn propagate(backend: &mut dyn StepBackend, tg: &mut Tangent, h: f64, n: usize) {
+    let s = backend.scheme().stages();
+    let lay = backend.layout();
+    let np = tg.theta.len();
+    for c in 0..tg.columns(n) {
+        let col = c * 2 * n;
+        for m in 0..s {
+            tg.dx[m * n..(m + 1) * n].copy_from_slice(&tg.m[col..col + n]);
+        }
+        let param = (c >= 2 * n).then(|| (&tg.pnode[..], c - 2 * n, np));
+        linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
+        for j in 0..s - 1 {
+            for a in 0..n {
+                let dp = if j == 0 { tg.m[col + n + a] } else { 0.0 };
+                tg.rhs[lay.at(j + 1, a)] = -(tg.g[j * n + a] + dp);
+            }
+        }
+        backend.solve_linearized(&mut tg.rhs);
+        for m in 1..s {
+            for a in 0..n {
+                tg.dx[m * n + a] = tg.m[col + a] + tg.rhs[lay.at(m, a)];
+            }
+        }
+        linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
+        for a in 0..n {
+            tg.m[col + a] = tg.dx[(s - 1) * n + a];
+            tg.m[col + n + a] = tg.g[(s - 1) * n + a];
         }
     }
 }
