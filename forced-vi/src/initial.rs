@@ -138,14 +138,34 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     step: usize,
     t: f64,
 ) -> Result<SVector<f64, N>, Error> {
+    let lv = |v: &SVector<f64, N>| model.node_gradient_at(t, q, v).lv;
+    let mass = |v: &SVector<f64, N>| model.mass_matrix_at(t, q, v);
+    let constant_mass = M::STRUCTURE.constant_mass;
+    velocity_iteration::<N>((&lv, &mass, constant_mass), p, guess, (step, t))
+}
+
+/// The model's `v ↦ L_v(t, q, v)` at fixed `(t, q)`.
+type MomentumMap<'a, const N: usize> = dyn Fn(&SVector<f64, N>) -> SVector<f64, N> + 'a;
+/// The model's `v ↦ E(t, q, v)` at fixed `(t, q)`.
+type MassMap<'a, const N: usize> = dyn Fn(&SVector<f64, N>) -> SMatrix<f64, N, N> + 'a;
+
+/// [`solve_velocity`]'s iteration on the model's `(L_v, E, constant mass)` at fixed
+/// `(t, q)`. Generic over the number of coordinates only: one copy serves every model of
+/// `N` coordinates.
+fn velocity_iteration<const N: usize>(
+    (lv, mass, constant_mass): (&MomentumMap<'_, N>, &MassMap<'_, N>, bool),
+    p: &SVector<f64, N>,
+    guess: SVector<f64, N>,
+    (step, t): (usize, f64),
+) -> Result<SVector<f64, N>, Error> {
     let singular = |rcond| Error::SingularMassMatrix { step, t, rcond };
     let residual_at = |v: &SVector<f64, N>| -> Option<SVector<f64, N>> {
-        let r = model.node_gradient_at(t, q, v).lv - p;
+        let r = lv(v) - p;
         all_finite(&r).then_some(r)
     };
     let mut v = guess;
-    if M::STRUCTURE.constant_mass {
-        let e = model.mass_matrix_at(t, q, &v);
+    if constant_mass {
+        let e = mass(&v);
         let r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
         let (dv, _) = crate::newton::solve_small(&e, &(-r)).ok_or(singular(0.0))?;
         v += dv;
@@ -157,7 +177,7 @@ pub(crate) fn solve_velocity<M: ForcedLagrangian<N>, const N: usize>(
     }
     let mut r = residual_at(&v).ok_or(Error::NonFiniteModel { step, t })?;
     for _ in 0..60 {
-        let e = model.mass_matrix_at(t, q, &v);
+        let e = mass(&v);
         if !all_finite(&e) {
             return Err(Error::NonFiniteModel { step, t });
         }
