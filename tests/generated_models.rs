@@ -24,6 +24,12 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     v2: [f64; N],
 ) -> [bool; 3] {
     let s = M::STRUCTURE;
+    // The promise of no constraints (the runtime then compiles no constraint code).
+    assert!(
+        M::CONSTRAINED || m.constraint_count() == 0,
+        "{name}: CONSTRAINED = false but {} constraints",
+        m.constraint_count()
+    );
     let (qs, vs) = (SVector::from(q), SVector::from(v));
     let (qs2, vs2) = (SVector::from(q2), SVector::from(v2));
     // The code with the parameters as duals (for sensitivities) is the model's own at

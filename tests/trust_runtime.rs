@@ -478,3 +478,40 @@ fn trust_streaming_failure_keeps_its_stats() {
     assert_eq!(f.stats.steps + 1, seen, "every completed step was streamed");
     assert!(f.stats.newton_iterations >= f.stats.steps);
 }
+
+/// A hand-written model that declares a constraint but promises none
+/// (`ForcedLagrangian::CONSTRAINED = false`): the runtime, which then compiles no
+/// constraint code for it, refuses it before any step.
+struct BrokenPromise;
+
+impl ForcedLagrangian<2> for BrokenPromise {
+    const CONSTRAINED: bool = false;
+
+    fn lagrangian<D: Scalar>(&self, _q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] + v[1] * v[1]) * 0.5
+    }
+
+    fn constraint_count(&self) -> usize {
+        1
+    }
+
+    fn constraints<D: Scalar>(&self, _t: D, q: &[D; 2], g: &mut [D]) {
+        g[0] = q[0] * q[0] + q[1] * q[1] - 1.0;
+    }
+}
+
+#[test]
+fn trust_a_broken_constraint_promise_is_refused() {
+    let Err(err) = Integrator::new(&BrokenPromise, Scheme::lobatto(3).unwrap(), 0.1) else {
+        panic!("a model that breaks its promise was accepted");
+    };
+    assert!(
+        matches!(&err, Error::InvalidModel { message } if message.contains("CONSTRAINED")),
+        "{err:?}"
+    );
+    // The macro's promises, checked at compile time: none for a model with
+    // `constraints(...)`, no constraints for one without.
+    use forced_vi_models::models::{CartesianPendulum, CoupledVanDerPol};
+    const { assert!(!<CoupledVanDerPol as ForcedLagrangian<2>>::CONSTRAINED) };
+    const { assert!(<CartesianPendulum as ForcedLagrangian<2>>::CONSTRAINED) };
+}

@@ -424,6 +424,12 @@
 //! varying. A hand-written model starts from [`Structure::GENERAL`], which promises nothing;
 //! a wrong promise gives wrong results, so claim only what holds.
 //!
+//! Beside `STRUCTURE`, [`ForcedLagrangian::CONSTRAINED`] is `false` for every model without
+//! `constraints(...)`: the integrator then compiles none of a constrained step's code for it
+//! (a smaller build). A hand-written model keeps the default `true` unless it has no
+//! constraints; a model that declares constraints under `false` is refused with
+//! [`Error::InvalidModel`](crate::Error::InvalidModel).
+//!
 //! ```
 //! use forced_vi::prelude::*;
 //!

@@ -105,7 +105,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             }
             rj.copy_from_slice(gj.as_slice());
         }
-        if self.cons > 0 {
+        // `M::CONSTRAINED` first, alone: a model that promises no constraints compiles none
+        // of their code (see `ForcedLagrangian::CONSTRAINED`).
+        if M::CONSTRAINED && self.cons > 0 {
             self.constraint_rows(z, r, None)?;
         }
         Ok(())
@@ -189,7 +191,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 add_block(js, rows, t.j, t.m, t.e / h, &nj.e);
             }
         }
-        if self.cons > 0 {
+        if M::CONSTRAINED && self.cons > 0 {
             let mut scratch = DVector::zeros(0);
             self.constraint_rows(z, &mut scratch, Some(jac))?;
         }

@@ -39,6 +39,8 @@ impl HandCoupledVanDerPol {
 }
 
 impl ForcedLagrangian<2> for HandCoupledVanDerPol {
+    // No constraints: the runtime leaves their code out.
+    const CONSTRAINED: bool = false;
     const STRUCTURE: Structure = Structure {
         has_force: true,
         force_uses_velocity: true,

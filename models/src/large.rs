@@ -217,6 +217,8 @@ const STRUCTURE: Structure = Structure {
 };
 
 impl<const N: usize> ForcedLagrangian<N> for FpuChain<N> {
+    // No constraints: the runtime leaves their code out.
+    const CONSTRAINED: bool = false;
     const STRUCTURE: Structure = STRUCTURE;
     fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D {
         lagrangian(&self.law, self.bonds(), q, v)
@@ -245,6 +247,8 @@ impl<const N: usize> SparseNode for FpuChain<N> {
 }
 
 impl<const W: usize, const N: usize> ForcedLagrangian<N> for Lattice2d<W, N> {
+    // No constraints: the runtime leaves their code out.
+    const CONSTRAINED: bool = false;
     const STRUCTURE: Structure = STRUCTURE;
     fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D {
         lagrangian(&self.law, self.bonds(), q, v)

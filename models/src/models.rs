@@ -349,6 +349,8 @@ impl DrivenDuffing {
 }
 
 impl ForcedLagrangian<1> for DrivenDuffing {
+    // No constraints: the runtime leaves their code out.
+    const CONSTRAINED: bool = false;
     const STRUCTURE: Structure = Structure::GENERAL_DRIVEN;
 
     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
@@ -395,6 +397,8 @@ impl KapitzaPendulum {
 }
 
 impl ForcedLagrangian<1> for KapitzaPendulum {
+    // No constraints: the runtime leaves their code out.
+    const CONSTRAINED: bool = false;
     const STRUCTURE: Structure = Structure::GENERAL_DRIVEN;
 
     fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {

@@ -398,7 +398,10 @@ impl<'c, 'm> Gen<'c, 'm> {
     fn constraint_items(&self) -> TokenStream {
         let c = self.c;
         if c.constraints.is_empty() {
-            return TokenStream::new();
+            // The promise that lets the runtime leave out a constrained step's code.
+            return quote!(
+                const CONSTRAINED: bool = false;
+            );
         }
         let (n, d, scalar_bound) = (&c.n, &self.d, &self.scalar_bound);
         let (dq, dv, dt) = (&self.dq, &self.dv, &self.dt);

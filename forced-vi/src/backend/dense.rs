@@ -108,6 +108,28 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
         true
     }
 
+    /// A constrained step's Newton result, ended by its projection ([`Self::project`]).
+    fn end_constrained(
+        &mut self,
+        solved: Result<NewtonReport, NewtonFailure>,
+    ) -> Result<NewtonReport, StepFailure> {
+        match solved {
+            Ok(report) => {
+                self.project()?;
+                Ok(report)
+            }
+            // The one Newton iteration of the error estimate (`crate::control`) ends its
+            // step too, so that its momentum carries its constraint impulse.
+            Err(f @ NewtonFailure::MaxIterations { .. })
+                if self.newton.options().max_iterations == 1 =>
+            {
+                self.project()?;
+                Err(StepFailure::Newton(f))
+            }
+            Err(f) => Err(StepFailure::Newton(f)),
+        }
+    }
+
     /// The end of a constrained step (DESIGN §11): the multiplier `μ = λ_{s−1}` and the
     /// velocity `v_{k+1}` with `L_v(q_{k+1}, v_{k+1}) + h b_{s−1} G(q_{k+1})ᵀ μ = p̃` and
     /// `G(q_{k+1}) v_{k+1} = 0`, by Newton on the saddle-point matrix `[[E, h b Gᵀ], [G, 0]]`;
@@ -285,23 +307,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         }
         let solved = self.newton.solve(prob, &mut self.z, scale);
         self.prob.blocks_given = false;
-        if self.prob.cons == 0 {
-            return solved.map_err(StepFailure::Newton);
-        }
-        match solved {
-            Ok(report) => {
-                self.project()?;
-                Ok(report)
-            }
-            // The one Newton iteration of the error estimate (`crate::control`) ends its
-            // step too, so that its momentum carries its constraint impulse.
-            Err(f @ NewtonFailure::MaxIterations { .. })
-                if self.newton.options().max_iterations == 1 =>
-            {
-                self.project()?;
-                Err(StepFailure::Newton(f))
-            }
-            Err(f) => Err(StepFailure::Newton(f)),
+        if M::CONSTRAINED && self.prob.cons > 0 {
+            self.end_constrained(solved)
+        } else {
+            solved.map_err(StepFailure::Newton)
         }
     }
 
@@ -476,12 +485,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         &mut self,
         (t, q, v): (f64, &[f64], &[f64]),
     ) -> Result<[f64; 3], Error> {
-        Ok(crate::initial::constraint_residuals_at(
-            self.prob.model,
-            t,
-            q,
-            v,
-        ))
+        if M::CONSTRAINED {
+            Ok(crate::initial::constraint_residuals_at(
+                self.prob.model,
+                t,
+                q,
+                v,
+            ))
+        } else {
+            Ok([0.0; 3])
+        }
     }
 
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {

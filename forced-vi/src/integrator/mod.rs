@@ -97,7 +97,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// [`LinearPath::Auto`].
     ///
     /// Fails if `h` is not positive and finite (with `1/h` finite too), a model parameter
-    /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), or its
+    /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), it
+    /// declares constraints while promising none ([`ForcedLagrangian::CONSTRAINED`]), or its
     /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack (for a model with sparse
     /// kernels, only when a run takes the dense path).
     pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
@@ -113,6 +114,14 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         model
             .check_model()
             .map_err(|message| Error::InvalidModel { message })?;
+        if !M::CONSTRAINED && model.constraint_count() > 0 {
+            return Err(Error::InvalidModel {
+                message: format!(
+                    "constraint_count() is {} but CONSTRAINED is false",
+                    model.constraint_count()
+                ),
+            });
+        }
         Ok(Integrator {
             model,
             scheme,

@@ -141,7 +141,9 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         // A constrained model whose node kernels do not evaluate its constraints gets them
         // from its generic `constraints` with dual numbers (`DualConstraints`).
         let cons = self.model.constraint_count();
-        let node = if cons > 0 && node.sparse_constraint_count() != cons {
+        // `M::CONSTRAINED` first, alone: a model that promises no constraints compiles none
+        // of their code (see `ForcedLagrangian::CONSTRAINED`).
+        let node = if M::CONSTRAINED && cons > 0 && node.sparse_constraint_count() != cons {
             if node.sparse_constraint_count() != 0 {
                 return Err(Error::InvalidModel {
                     message: format!(

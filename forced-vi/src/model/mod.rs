@@ -166,6 +166,14 @@ pub trait ForcedLagrangian<const N: usize> {
         self.force_at(t, q, v)
     }
 
+    /// Whether the model may have holonomic constraints. `false` promises that
+    /// [`ForcedLagrangian::constraint_count`] is 0, and the runtime then compiles none of a
+    /// constrained step's code for the model (its constraint rows, projection and dual-number
+    /// constraint kernels): a smaller, faster build. The default, `true`, promises nothing;
+    /// the macro sets `false` for a model without `constraints(...)`. A model that breaks the
+    /// promise is refused by [`crate::Integrator::new`] ([`crate::Error::InvalidModel`]).
+    const CONSTRAINED: bool = true;
+
     /// The number `m` of holonomic constraints `g(t, q) = 0` (DESIGN §11); none by default.
     fn constraint_count(&self) -> usize {
         0
