@@ -428,7 +428,7 @@
 //! `constraints(...)`: the integrator then compiles none of a constrained step's code for it
 //! (a smaller build). A hand-written model keeps the default `true` unless it has no
 //! constraints; a model that declares constraints under `false` is refused with
-//! [`Error::InvalidModel`](crate::Error::InvalidModel).
+//! [`Error::InvalidModel`].
 //!
 //! ```
 //! use forced_vi::prelude::*;
