@@ -41,6 +41,20 @@ pub const MAX_STAGES: usize = 32;
 /// previous step, so beyond this the predictor is a straight line along the velocity.
 const MAX_PREDICTOR_LEBESGUE: f64 = 1e6;
 
+/// Lobatto schemes with up to this many points have their tables made once per process.
+const CACHED_STAGES: usize = 12;
+
+/// The tables of the Lobatto schemes with up to [`CACHED_STAGES`] points, made on first use
+/// and shared by every [`Scheme`] of that many points, with their error estimate's tables.
+/// Making them costs far more than a step of a small model (measured with callgrind: about
+/// 33 000 instructions for lobatto5, 64 000 for the tables of its adaptive estimate,
+/// 80 000 for lobatto7, against about 5 500 for a lobatto3 step of a two-coordinate model):
+/// without the cache, a program that builds an integrator per short run (a shooting
+/// method, a parameter scan) would pay them on every run. Above that many points (at most
+/// 33, about 1.8 MB at 32) each scheme makes its own.
+static LOBATTO_TABLES: [OnceLock<Arc<Tables>>; CACHED_STAGES + 1] =
+    [const { OnceLock::new() }; CACHED_STAGES + 1];
+
 fn check_stages(s: usize) -> Result<usize, SchemeError> {
     if s < 2 {
         Err(SchemeError::TooFewStages(s))
@@ -148,13 +162,26 @@ impl Scheme {
                 }
                 (vec![0.0, 1.0], vec![a], vec![1.0])
             }
-            SchemeId::Lobatto(s) => {
-                check_stages(s)?;
-                let (x, w) = lobatto_nodes_weights(s);
-                (x.clone(), x, w)
-            }
+            SchemeId::Lobatto(s) => return check_stages(s).map(Self::lobatto_tables),
         };
         Ok(Self::from_coefficients(id, d, c, b))
+    }
+
+    /// The `s`-point Lobatto scheme, `s ≥ 2` checked by the caller (the error reference may
+    /// have `MAX_STAGES + 1` points). Up to [`CACHED_STAGES`] points its tables are made
+    /// once per process and shared (see [`LOBATTO_TABLES`]).
+    fn lobatto_tables(s: usize) -> Self {
+        let make = || {
+            let (x, w) = lobatto_nodes_weights(s);
+            Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w)
+        };
+        match LOBATTO_TABLES.get(s) {
+            Some(cell) => Scheme {
+                id: SchemeId::Lobatto(s),
+                t: Arc::clone(cell.get_or_init(|| make().t)),
+            },
+            None => make(),
+        }
     }
 
     /// The `s`-stage Lobatto Galerkin scheme (order `2s − 2`).
@@ -349,9 +376,7 @@ impl Scheme {
     /// The error estimate's tables ([`EstimateTables`]), made on the first call.
     pub(crate) fn estimate_tables(&self) -> &EstimateTables {
         self.t.estimate.get_or_init(|| {
-            let s = self.order() / 2 + 2;
-            let (x, w) = lobatto_nodes_weights(s);
-            let reference = Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w);
+            let reference = Self::lobatto_tables(self.order() / 2 + 2);
             let (d, c) = (reference.d(), reference.c());
             let s1 = self.stages() - 1;
             let lift = d[1..]

@@ -158,3 +158,22 @@ fn basis_at_agrees_with_the_lagrange_products() {
         }
     }
 }
+
+#[test]
+fn lobatto_tables_are_made_once_up_to_the_cached_stages() {
+    for s in 2..=MAX_STAGES {
+        let (a, b) = (Scheme::lobatto(s).unwrap(), Scheme::lobatto(s).unwrap());
+        // Shared below the bound, made per scheme above it; the same values either way.
+        assert_eq!(Arc::ptr_eq(&a.t, &b.t), s <= CACHED_STAGES, "s = {s}");
+        assert_eq!((a.d(), a.b()), (b.d(), b.b()));
+        let (x, w) = lobatto_nodes_weights(s);
+        assert_eq!((a.d(), a.b()), (&x[..], &w[..]), "s = {s}");
+        // The error reference: lobatto(s + 1), from the cache where it is there too.
+        let r = a.error_reference();
+        assert_eq!(r.id(), SchemeId::Lobatto(s + 1));
+        assert_eq!(r.d(), &lobatto_nodes_weights(s + 1).0[..]);
+        if s < CACHED_STAGES {
+            assert!(Arc::ptr_eq(&r.t, &Scheme::lobatto(s + 1).unwrap().t));
+        }
+    }
+}
