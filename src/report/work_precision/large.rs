@@ -143,6 +143,7 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
                         mode,
                         h_or_tol: x,
                         steps: stats.steps,
+                        member_steps_min: stats.steps,
                         newton_iters: stats.newton_iterations,
                         seconds: median(&mut times),
                         err: [spread(eq), spread(ep), spread(ee)],

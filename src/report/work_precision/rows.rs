@@ -79,6 +79,9 @@ pub struct Row {
     pub h_or_tol: f64,
     /// Steps (summed over members; accepted steps of adaptive runs).
     pub steps: usize,
+    /// The fewest steps of one member's run (the run's own steps for a single initial
+    /// state).
+    pub member_steps_min: usize,
     /// Newton iterations (summed over members).
     pub newton_iters: usize,
     /// Median wall time in seconds.

@@ -267,12 +267,17 @@ struct Proportionality {
     scene: &'static str,
     method: Method,
     points: usize,
+    /// Of `points`, those the slope is fitted to.
+    fitted: usize,
     slope: Option<f64>,
     worst_ratio: f64,
     steps: (usize, usize),
     /// The scene's amplification ([`Scene::amplification`]), if it could be measured.
     amplification: Option<f64>,
 }
+
+/// The fewest steps of a run whose error counts in the tolerance-proportionality slope.
+const MIN_RUN_STEPS: usize = 4;
 
 fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec<Proportionality> {
     let mut out = Vec::new();
@@ -290,15 +295,21 @@ fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec
                 );
             }
             let scale = reference_scale(*s)[0];
+            // The points of issue 23's rule, as in `tests/adaptive.rs`: errors above the
+            // round-off floor, from runs of at least `MIN_RUN_STEPS` steps (every member's,
+            // on an ensemble): in a run of 1 to 3 steps the error is set by the run's length,
+            // not by the tolerance.
             let pts: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| r.errors()[0] > 0.0 && !orders::at_floor(r.errors()[0], scale))
+                .filter(|r| r.member_steps_min >= MIN_RUN_STEPS)
                 .map(|r| (r.h_or_tol, r.errors()[0]))
                 .collect();
             out.push(Proportionality {
                 scene: s.name(),
                 method: *m,
                 points: rows.len(),
+                fitted: pts.len(),
                 slope: orders::slope(&pts),
                 worst_ratio: rows
                     .iter()
@@ -330,7 +341,9 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
          The second-order schemes (`lobatto2`, `midpoint`) stop at tol = {ORDER2_TOL_FLOOR:.0e}: \
          below it they need millions of steps (about 10⁷ at 10⁻¹²). Sweeps stop early in the \
          same ways as the fixed-step ones. Slope: least-squares slope of log err_q against \
-         log tol over the points above the round-off floor (target 0.8–1.2); worst err/tol: the largest final error in q \
+         log tol over the points above the round-off floor whose runs took at least {MIN_RUN_STEPS} steps each \
+         (every member's, on the ensemble: in a run of 1 to 3 steps the error is set by the run's length, not by the \
+         tolerance; the points column gives all the points and, in brackets, those fitted) (target 0.8–1.2); worst err/tol: the largest final error in q \
          over its tolerance (target ≤ 10). The controller bounds the local error per unit step; the final error is \
          those local errors carried to T by the flow, so it is about tol times the flow's amplification A: the mean over \
          {} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
@@ -345,7 +358,9 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
         &[
             col("scene", |p: &Proportionality| format!("`{}`", p.scene)),
             col("method", |p: &Proportionality| format!("`{}`", p.method)),
-            col("points", |p: &Proportionality| p.points.to_string()),
+            col("points (fitted)", |p: &Proportionality| {
+                format!("{} ({})", p.points, p.fitted)
+            }),
             col("slope", |p: &Proportionality| {
                 p.slope.map_or("–".into(), |x| format!("{x:.2}"))
             }),

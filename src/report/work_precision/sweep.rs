@@ -151,6 +151,7 @@ fn measure(
         mode,
         h_or_tol: x,
         steps: outcomes.iter().map(|o| o.steps).sum(),
+        member_steps_min: outcomes.iter().map(|o| o.steps).min().unwrap_or(0),
         newton_iters: outcomes.iter().map(|o| o.newton_iterations).sum(),
         seconds: timing.median,
         err: spreads(scene, &outcomes)?,
