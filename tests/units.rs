@@ -413,6 +413,32 @@ mod report_timing {
         };
         assert_eq!((a, b), (1.0, 2.0));
         assert_eq!(order, ['a', 'b', 'b', 'a', 'a', 'b']);
+        // Several, each round starting one further along; medians per function.
+        let order = std::cell::RefCell::new(Vec::new());
+        let mut samples = [
+            vec![3.0, 1.0, 2.0, 9.0],
+            vec![5.0; 4],
+            vec![0.5, 7.0, 0.25, 1.0],
+        ];
+        let (s0, rest) = samples.split_at_mut(1);
+        let (s1, s2) = rest.split_at_mut(1);
+        let mut f0 = || -> Result<f64, ()> {
+            order.borrow_mut().push(0);
+            Ok(s0[0].pop().unwrap())
+        };
+        let mut f1 = || -> Result<f64, ()> {
+            order.borrow_mut().push(1);
+            Ok(s1[0].pop().unwrap())
+        };
+        let mut f2 = || -> Result<f64, ()> {
+            order.borrow_mut().push(2);
+            Ok(s2[0].pop().unwrap())
+        };
+        let medians = rotated(4, &mut [&mut f0, &mut f1, &mut f2]).unwrap();
+        assert_eq!(medians, vec![2.5, 5.0, 0.75]);
+        assert_eq!(order.into_inner(), [0, 1, 2, 1, 2, 0, 2, 0, 1, 0, 1, 2]);
+        let mut fails = || -> Result<f64, &str> { Err("no") };
+        assert_eq!(rotated(2, &mut [&mut fails]), Err("no"));
     }
 }
 

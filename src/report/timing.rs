@@ -76,3 +76,21 @@ pub fn interleaved<E>(
     }
     Ok((median(&mut ta), median(&mut tb)))
 }
+
+/// Medians of several measurements over `repeats` rounds, each round running all of them
+/// and starting one further along (round `k` starts with `fs[k mod n]`), so that drifts in
+/// machine load and the cost of going first hit each alike. Each call returns one sample.
+pub fn rotated<E>(
+    repeats: usize,
+    fs: &mut [&mut dyn FnMut() -> Result<f64, E>],
+) -> Result<Vec<f64>, E> {
+    let n = fs.len();
+    let mut samples = vec![Vec::with_capacity(repeats); n];
+    for k in 0..repeats {
+        for j in 0..n {
+            let i = (k + j) % n;
+            samples[i].push(fs[i]()?);
+        }
+    }
+    Ok(samples.iter_mut().map(|s| median(s)).collect())
+}

@@ -199,8 +199,10 @@ pub struct Paired {
     pub baseline: (Method, f64),
     /// Their median wall times over the rounds, seconds, or why a run failed this time.
     pub seconds: Result<(f64, f64), String>,
-    /// The rounds (each runs both, alternating which goes first).
+    /// The rounds (each runs every candidate, rotating which goes first).
     pub rounds: usize,
+    /// The candidates timed in the rounds: variational runs and baseline runs.
+    pub candidates: (usize, usize),
 }
 
 impl Paired {

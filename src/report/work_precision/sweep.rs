@@ -160,37 +160,69 @@ fn measure(
 }
 
 /// The cheapest variational run and the cheapest baseline run of `summary` whose error in q
-/// on `scene` is at most `target`, timed again in alternating rounds (`None` when either
-/// never reached it).
+/// on `scene` is at most `target`, timed again in rounds (`None` when either side never
+/// reached it).
 ///
 /// The sweeps time each run once, at its own moment; on a machine shared with other jobs
 /// the speed drifts between those moments (measured: the same baseline run 1.8 times slower
 /// in one report than in the next), and the ratio of two such times carries the drift.
-/// Timed in alternation, right after each other, both runs see the same machine.
+/// So the [`PAIRED_CANDIDATES`] cheapest runs of each side by the sweeps' times are timed
+/// again, in rounds that run them all right after each other, and each side's fastest by
+/// those medians is kept: the sweeps' times only shortlist, and a run that was timed at a
+/// quiet moment does not stand in for one that is faster.
 pub fn paired(scene: &dyn Scene, summary: &Summary, target: f64, plan: &Plan) -> Option<Paired> {
     let cheapest = |variational: bool| {
-        summary
+        let mut rows: Vec<&Row> = summary
             .rows
             .iter()
             .filter(|r| r.scene == scene.name() && r.method.is_variational() == variational)
             .filter(|r| r.errors()[0] <= target)
-            .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
+            .collect();
+        rows.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        rows.truncate(PAIRED_CANDIDATES);
+        rows
     };
-    let (vi, base) = (cheapest(true)?, cheapest(false)?);
-    let (vi_scheme, base_scheme) = (vi.method.scheme(), base.method.scheme());
-    let sample = |row: &Row, scheme: Option<&Scheme>| {
-        let (out, seconds) =
-            timing::timed(|| run_members(scene, (&row.method, row.mode), scheme, row.h_or_tol));
-        out.map(|_| seconds)
-    };
+    let (vis, bases) = (cheapest(true), cheapest(false));
+    let (fastest_vi, fastest_base) = (vis.first()?, bases.first()?);
     let rounds = plan
-        .repeats(vi.seconds.max(base.seconds))
+        .repeats(fastest_vi.seconds.max(fastest_base.seconds))
         .max(plan.max_repeats.min(5));
-    let seconds = timing::interleaved(
-        rounds,
-        || sample(vi, vi_scheme.as_ref()),
-        || sample(base, base_scheme.as_ref()),
-    );
+    let candidates: Vec<(&Row, Option<Scheme>)> = vis
+        .iter()
+        .chain(&bases)
+        .map(|r| (*r, r.method.scheme()))
+        .collect();
+    let mut samplers: Vec<Box<dyn FnMut() -> Result<f64, String> + '_>> = candidates
+        .iter()
+        .map(|(row, scheme)| {
+            Box::new(move || {
+                let (out, seconds) = timing::timed(|| {
+                    run_members(
+                        scene,
+                        (&row.method, row.mode),
+                        scheme.as_ref(),
+                        row.h_or_tol,
+                    )
+                });
+                out.map(|_| seconds)
+            }) as Box<dyn FnMut() -> Result<f64, String> + '_>
+        })
+        .collect();
+    let mut fs: Vec<&mut dyn FnMut() -> Result<f64, String>> =
+        samplers.iter_mut().map(|f| &mut **f as _).collect();
+    let medians = timing::rotated(rounds, &mut fs);
+    fn best<'r>(medians: &[f64], rows: &[&'r Row]) -> Option<(&'r Row, f64)> {
+        let i = (0..rows.len()).min_by(|&a, &b| medians[a].total_cmp(&medians[b]))?;
+        Some((rows[i], medians[i]))
+    }
+    let (vi, base, seconds) = match medians {
+        Ok(m) => {
+            let (vi, tv) = best(&m[..vis.len()], &vis)?;
+            let (base, tb) = best(&m[vis.len()..], &bases)?;
+            (vi, base, Ok((tv, tb)))
+        }
+        Err(e) => (*fastest_vi, *fastest_base, Err(e)),
+    };
     Some(Paired {
         scene: scene.name(),
         target,
@@ -198,8 +230,12 @@ pub fn paired(scene: &dyn Scene, summary: &Summary, target: f64, plan: &Plan) ->
         baseline: (base.method, base.h_or_tol),
         seconds,
         rounds,
+        candidates: (vis.len(), bases.len()),
     })
 }
+
+/// How many of the cheapest runs of each side [`paired`] times again.
+pub const PAIRED_CANDIDATES: usize = 3;
 
 /// The grid of `method` in `mode` on `scene`: step sizes, or tolerances (second-order
 /// schemes stop at [`ORDER2_TOL_FLOOR`] in adaptive mode).
