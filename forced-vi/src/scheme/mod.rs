@@ -71,7 +71,10 @@ fn check_stages(s: usize) -> Result<usize, SchemeError> {
 /// A scheme's coefficients and the matrices derived from them.
 ///
 /// Cloning is cheap: the tables are shared (a reference count), so a scheme can be cloned
-/// into every run without copying them.
+/// into every run without copying them. The tables of a Lobatto scheme with up to 12 points
+/// (and those of its adaptive error estimate) are made once per process, on first use, and
+/// shared by every scheme of that size: building `Scheme::lobatto(s)` again, for a run or an
+/// [`Integrator`](crate::Integrator) per parameter set, costs no more than a clone.
 #[derive(Clone, Debug)]
 pub struct Scheme {
     id: SchemeId,
