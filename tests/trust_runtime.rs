@@ -3,7 +3,7 @@
 //! of the trust issue: `cargo test --release --test models_suite trust_runtime::`.
 
 use forced_vi::prelude::*;
-use forced_vi::{Error, NewtonOptions, SchemeError};
+use forced_vi::{Error, NewtonOptions, SchemeError, StepOptions};
 
 /// `L = ½v² − ½q²`, `F = −c v`.
 struct Damped {
@@ -114,7 +114,7 @@ fn trust_records_that_cannot_fit_are_refused_before_stepping() {
 #[test]
 fn trust_a_tiny_final_time_takes_one_short_step() {
     let model = Damped { c: 0.1 };
-    for (h, t_final) in [(1.0, 1e-12), (0.1, 1e-300), (1.0, 5e-11)] {
+    for (h, t_final) in [(1.0, 1e-12), (0.1, 1e-290), (1.0, 5e-11)] {
         let run = Integrator::new(&model, Scheme::lobatto(3).unwrap(), h)
             .unwrap()
             .solve(
@@ -135,13 +135,72 @@ fn trust_a_tiny_final_time_takes_one_short_step() {
     }
 }
 
+/// From rest, a tiny step moves `q` by `h² / 2`, which underflows: the step's solve must end
+/// at the iterate the arithmetic can hold (`q` unchanged, `p = −h q`), not fail to converge.
+/// A final time below the smallest step is refused, adaptive runs included (it used to make
+/// an adaptive step shrink to zero and retry it without end).
+#[test]
+fn trust_a_tiny_final_time_from_rest() {
+    let model = Damped { c: 0.1 };
+    let init = || InitialState::from_velocity([1.0], [0.0]);
+    for t_final in [1e-200, 1e-250, 1e-290, 1.01 * StepOptions::SMALLEST_STEP] {
+        for s in [2, 3, 5] {
+            let fixed = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.1).unwrap();
+            let adaptive = Integrator::adaptive(&model, Scheme::lobatto(s).unwrap(), 1e-8, 1e-8);
+            for integ in [fixed, adaptive.unwrap()] {
+                let end = integ
+                    .final_state(init(), t_final)
+                    .unwrap_or_else(|f| panic!("lobatto{s}, t_final = {t_final:e}: {}", f.error));
+                assert_eq!(
+                    (end.q[0], end.stats.steps),
+                    (1.0, 1),
+                    "t_final = {t_final:e}"
+                );
+                assert!(
+                    (end.p[0] + t_final).abs() <= 1e-15 * t_final,
+                    "{}",
+                    end.p[0]
+                );
+            }
+        }
+    }
+    for t_final in [
+        0.99 * StepOptions::SMALLEST_STEP,
+        1e-300,
+        2.3e-308,
+        1e-310,
+        5e-324,
+    ] {
+        let adaptive = Integrator::adaptive(&model, Scheme::lobatto(3).unwrap(), 1e-8, 1e-8);
+        let fixed = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.1).unwrap();
+        for integ in [fixed, adaptive.unwrap()] {
+            let err = integ.final_state(init(), t_final).unwrap_err().error;
+            assert!(
+                matches!(err, Error::InvalidFinalTime { .. }),
+                "{t_final:e}: {err}"
+            );
+        }
+    }
+}
+
 #[test]
 fn trust_subnormal_and_absurd_step_sizes_are_invalid() {
     let model = Damped { c: 0.1 };
-    for h in [5e-324, 1e-310, f64::MIN_POSITIVE / 4.0] {
+    // Below the smallest step (1.0e-292), where `1 / h` times a scheme's coefficients may
+    // overflow (2.3e-308 made lobatto3's step equations non-finite).
+    let smallest = StepOptions::SMALLEST_STEP;
+    for h in [
+        5e-324,
+        1e-310,
+        f64::MIN_POSITIVE / 4.0,
+        2.3e-308,
+        1e-300,
+        0.99 * smallest,
+    ] {
         let err = Integrator::new(&model, Scheme::midpoint(), h).unwrap_err();
         assert!(matches!(err, Error::InvalidStepSize { .. }), "{h}: {err}");
     }
+    assert!(Integrator::new(&model, Scheme::midpoint(), smallest).is_ok());
 }
 
 // ---- Class 3: no stack overflow for moderately large models. ----

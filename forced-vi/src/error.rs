@@ -79,14 +79,18 @@ impl NewtonFailure {
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
 pub enum Error {
-    /// The step size is not a positive finite number.
-    #[error("step size h = {h} must be positive and finite")]
+    /// The step size is not a finite number of at least
+    /// [`StepOptions::SMALLEST_STEP`](crate::StepOptions::SMALLEST_STEP).
+    #[error("step size h = {h:?} must be positive and finite (and at least 1.0e-292)")]
     InvalidStepSize {
         /// The rejected step size.
         h: f64,
     },
-    /// The final time is negative or not finite.
-    #[error("final time {t_final} must be finite and non-negative")]
+    /// The final time is negative, not finite, or positive but below
+    /// [`StepOptions::SMALLEST_STEP`](crate::StepOptions::SMALLEST_STEP).
+    #[error(
+        "final time {t_final:?} must be finite and non-negative (and zero or at least 1.0e-292)"
+    )]
     InvalidFinalTime {
         /// The rejected final time.
         t_final: f64,

@@ -574,7 +574,10 @@
 //! struct Oscillator {}
 //!
 //! let err = Integrator::new(&Oscillator {}, Scheme::lobatto(3)?, 0.0).err().expect("h = 0");
-//! assert_eq!(err.to_string(), "step size h = 0 must be positive and finite");
+//! assert_eq!(
+//!     err.to_string(),
+//!     "step size h = 0.0 must be positive and finite (and at least 1.0e-292)"
+//! );
 //! assert!(matches!(err, forced_vi::Error::InvalidStepSize { .. }));
 //! # Ok::<(), forced_vi::Error>(())
 //! ```

@@ -96,13 +96,13 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// An integrator with step `h`. Defaults: [`StepOptions::default`], fixed steps,
     /// [`LinearPath::Auto`].
     ///
-    /// Fails if `h` is not positive and finite (with `1/h` finite too), a model parameter
+    /// Fails if `h` is not finite and at least [`StepOptions::SMALLEST_STEP`], a model parameter
     /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), it
     /// declares constraints while promising none ([`ForcedLagrangian::CONSTRAINED`]), or its
     /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack (for a model with sparse
     /// kernels, only when a run takes the dense path).
     pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
-        if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
+        if !(h.is_finite() && h >= StepOptions::SMALLEST_STEP) {
             return Err(Error::InvalidStepSize { h });
         }
         if model.sparse_node().is_none() {

@@ -115,9 +115,22 @@ fn max_norm(x: &[f64]) -> f64 {
 }
 
 /// The round-off level of a residual whose terms, of size `scale` and `|J| · |z|`, cancel.
+///
+/// An iterate is resolved to `ε |z|`, but never below the smallest normal number: where the
+/// solution's entries underflow (a step of `h = 1e-200` from rest moves `q` by `h² ≈ 0`),
+/// a correction smaller than that is lost, so the floor counts `|z|` as at least
+/// `f64::MIN_POSITIVE / ε` and the solve ends at the iterate the arithmetic can hold,
+/// instead of failing to converge.
 #[inline]
 pub fn round_off_floor(scale: f64, jac_scale: f64, z_norm: f64) -> f64 {
-    64.0 * f64::EPSILON * (scale + jac_scale * z_norm)
+    const Z_RESOLVED: f64 = f64::MIN_POSITIVE / f64::EPSILON;
+    // A comparison, not `f64::max`, which would turn a NaN norm into a finite floor.
+    let z = if z_norm < Z_RESOLVED {
+        Z_RESOLVED
+    } else {
+        z_norm
+    };
+    64.0 * f64::EPSILON * (scale + jac_scale * z)
 }
 
 impl<V: Buffer + Clone> Iteration<V> {

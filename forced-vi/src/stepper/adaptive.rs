@@ -24,7 +24,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let t0 = self.t;
         self.saved.copy_from(&self.state);
         let span = self.t_final;
-        let h_min = 16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs());
+        // Never below the smallest step a run takes (a step that shrank to 0 would be
+        // retried without end).
+        let h_min = (16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs()))
+            .max(super::StepOptions::SMALLEST_STEP);
         let mut iters = 0;
         let mut last_failure = None;
         loop {

@@ -6,9 +6,10 @@ use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::{StepRecord, non_finite_field};
 
-/// Refuses a final time that is negative or not finite, and invalid Newton options.
+/// Refuses a final time that is negative, not finite or positive below
+/// [`StepOptions::SMALLEST_STEP`], and invalid Newton options.
 pub(crate) fn check_run(options: &StepOptions, t_final: f64) -> Result<(), Error> {
-    if !(t_final.is_finite() && t_final >= 0.0) {
+    if !(t_final.is_finite() && (t_final == 0.0 || t_final >= StepOptions::SMALLEST_STEP)) {
         return Err(Error::InvalidFinalTime { t_final });
     }
     options

@@ -75,6 +75,12 @@ pub struct StepOptions {
 }
 
 impl StepOptions {
+    /// The smallest step size, and the smallest positive final time, a run accepts:
+    /// `2⁻⁹⁷⁰ ≈ 1.0e-292` (`f64::MIN_POSITIVE / ε`). A step's equations hold `1 / h` times
+    /// the scheme's coefficients and the model's mass, and a velocity is an increment over
+    /// `h`: below this they may leave the range of `f64` (measured: `h = 2.3e-308` made
+    /// them overflow), while every step above it keeps 16 digits of headroom.
+    pub const SMALLEST_STEP: f64 = f64::MIN_POSITIVE / f64::EPSILON;
     /// The default cap on steps per run: 10⁹.
     pub const DEFAULT_MAX_STEPS: usize = 1_000_000_000;
     /// The most subdivision levels a step may use: 2²⁰ substeps.
