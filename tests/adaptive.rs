@@ -308,7 +308,7 @@ fn adaptive_output_at_requested_times() {
     let neg = integ.solve(init, 1.0, output::Samples(&[-0.1, 0.5]));
     assert!(matches!(
         neg.unwrap_err().error,
-        Error::InvalidFinalTime { .. }
+        Error::InvalidOutputTime { .. }
     ));
 }
 

@@ -183,6 +183,81 @@ fn trust_a_tiny_final_time_from_rest() {
     }
 }
 
+/// A run of length zero is the initial state, with error control as with fixed steps (an
+/// adaptive one used to fail choosing its first step, of size zero), whatever the output.
+#[test]
+fn trust_a_zero_final_time_is_the_initial_state_on_every_path() {
+    let model = Damped { c: 0.1 };
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    let fixed = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.1).unwrap();
+    let adaptive = Integrator::adaptive(&model, Scheme::lobatto(3).unwrap(), 1e-8, 1e-8).unwrap();
+    let auto = Integrator::auto(&model, 1e-8, 1e-8).unwrap();
+    for integ in [fixed, adaptive, auto] {
+        let end = integ.final_state(init, 0.0).unwrap();
+        assert_eq!((end.q[0], end.v[0], end.stats.steps), (1.0, 0.5, 0));
+        assert_eq!(
+            integ
+                .solve(init, 0.0, output::Records)
+                .unwrap()
+                .records
+                .len(),
+            1
+        );
+        let samples = integ
+            .solve(init, 0.0, output::Samples(&[0.0, 0.0]))
+            .unwrap();
+        assert_eq!(samples.len(), 2);
+        let tangents = integ.solve(init, 0.0, output::Tangents).unwrap();
+        assert_eq!(
+            tangents.wrt_initial,
+            nalgebra::SMatrix::<f64, 2, 2>::identity()
+        );
+        let loss = |_: &FinalState<1>| (nalgebra::SVector::from([1.0]), nalgebra::SVector::zeros());
+        let grad = integ.solve(init, 0.0, output::adjoint(loss)).unwrap();
+        assert_eq!(grad.wrt_initial.as_slice(), [1.0, 0.0]);
+    }
+}
+
+/// A loss whose gradient is NaN or infinite at the final state is the caller's error, named
+/// as such (it used to read as a non-finite model value), and keeps the forward run's steps.
+#[test]
+fn trust_a_non_finite_loss_gradient_is_a_typed_error() {
+    let model = Damped { c: 0.1 };
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    let integ = Integrator::adaptive(&model, Scheme::lobatto(4).unwrap(), 1e-8, 1e-8).unwrap();
+    for (gq, gv) in [(f64::NAN, 0.0), (0.0, f64::INFINITY)] {
+        let loss =
+            |_: &FinalState<1>| (nalgebra::SVector::from([gq]), nalgebra::SVector::from([gv]));
+        let f = integ.solve(init, 3.0, output::adjoint(loss)).unwrap_err();
+        let index = usize::from(gq.is_finite());
+        assert_eq!(
+            f.error,
+            Error::NonFiniteLossGradient { index },
+            "{}",
+            f.error
+        );
+        assert!(f.stats.steps > 0);
+    }
+}
+
+/// Output times must be finite and non-negative: a NaN is named as an output time.
+#[test]
+fn trust_a_bad_output_time_is_named_as_such() {
+    let model = Damped { c: 0.1 };
+    let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.1).unwrap();
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    for t in [f64::NAN, -1.0, f64::NEG_INFINITY] {
+        let f = integ
+            .solve(init, 1.0, output::Samples(&[0.5, t]))
+            .unwrap_err();
+        assert!(
+            matches!(f.error, Error::InvalidOutputTime { .. }),
+            "{t}: {}",
+            f.error
+        );
+    }
+}
+
 #[test]
 fn trust_subnormal_and_absurd_step_sizes_are_invalid() {
     let model = Damped { c: 0.1 };

@@ -225,6 +225,19 @@ pub enum Error {
     /// Output times that decrease, or that lie past the end of the run.
     #[error("output times must be non-decreasing and no later than the final time")]
     UnorderedTimes,
+    /// An output time is negative or not finite.
+    #[error("output time {t:?} must be finite and non-negative")]
+    InvalidOutputTime {
+        /// The rejected time.
+        t: f64,
+    },
+    /// The gradient of the loss that [`output::adjoint`](crate::output::adjoint) was given
+    /// at the final state has a NaN or infinite component.
+    #[error("the loss gradient's component {index} at the final state is not finite")]
+    NonFiniteLossGradient {
+        /// The component, in `(∂ℓ/∂q_T, ∂ℓ/∂v_T)` order.
+        index: usize,
+    },
     /// The initial data contain NaN or infinity.
     #[error("initial {what}[{index}] is not finite")]
     NonFiniteInitialData {
@@ -331,6 +344,8 @@ impl Error {
             Error::InvalidModel { .. } => "invalid_model".into(),
             Error::InvalidTolerance { .. } => "invalid_tolerance".into(),
             Error::UnorderedTimes => "unordered_times".into(),
+            Error::InvalidOutputTime { .. } => "invalid_output_time".into(),
+            Error::NonFiniteLossGradient { .. } => "non_finite_loss_gradient".into(),
             Error::InconsistentInitialState { .. } => "inconsistent_initial_state".into(),
             Error::UnsupportedConstraints { .. } => "unsupported_constraints".into(),
             Error::StepSizeTooSmall { .. } => "step_size_too_small".into(),

@@ -659,7 +659,8 @@
 //!
 //! The other input errors: [`Error::InvalidFinalTime`], [`Error::NonFiniteParameter`],
 //! [`Error::InvalidStepBounds`], [`Error::InvalidNewtonOptions`], [`Error::TooManySteps`],
-//! [`Error::UnorderedTimes`] and the scheme errors ([`SchemeError`](crate::SchemeError)).
+//! [`Error::UnorderedTimes`], [`Error::InvalidOutputTime`], [`Error::NonFiniteLossGradient`]
+//! and the scheme errors ([`SchemeError`](crate::SchemeError)).
 //!
 //! # Compile errors
 //!

@@ -82,8 +82,9 @@ pub struct Records;
 pub struct Final;
 
 /// The dense output at each of the given times (see [`DenseState`]), so that the step grid,
-/// fixed or adaptive, is free of the output grid. The times must be finite, non-decreasing
-/// and within `[0, t_final]` ([`Error::UnorderedTimes`] otherwise). Only the last step is
+/// fixed or adaptive, is free of the output grid. The times must be finite and non-negative
+/// ([`Error::InvalidOutputTime`] otherwise), non-decreasing and at most `t_final`
+/// ([`Error::UnorderedTimes`] otherwise). Only the last step is
 /// held, so memory grows with the samples, not the steps. On failure the samples before it
 /// come back in [`RunFailure::samples`].
 #[derive(Clone, Copy, Debug)]
@@ -221,7 +222,7 @@ impl<const N: usize> Output<N> for Samples<'_> {
     ) -> Result<Vec<DenseState<N>>, RunFailure<N>> {
         let times = self.0;
         if let Some(&t) = times.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
-            return Err(RunFailure::new(Error::InvalidFinalTime { t_final: t }));
+            return Err(RunFailure::new(Error::InvalidOutputTime { t }));
         }
         let ordered = times.windows(2).all(|w| w[0] <= w[1]);
         if !ordered || times.last().is_some_and(|&t| t > t_final) {
@@ -323,6 +324,9 @@ where
             let end = to_the_end(stepper)?;
             let (stats, tape_bytes) = (end.stats, stepper.tape_bytes());
             let (gq, gv) = (self.0)(&end);
+            if let Some(index) = gq.iter().chain(gv.iter()).position(|x| !x.is_finite()) {
+                return Err(stepper.failure(Error::NonFiniteLossGradient { index }));
+            }
             let (wrt_initial, wrt_parameters) = stepper
                 .adjoint((gq.as_slice(), gv.as_slice()))
                 .map_err(|e| stepper.failure(e))?;

@@ -168,6 +168,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             return Ok(());
         };
         let span = self.t_final;
+        // A run of length zero takes no step, as with fixed steps: only the initial record.
+        if span == 0.0 {
+            self.n_steps = 0;
+            return Ok(());
+        }
         let bounds = (self.options.min_step, self.options.max_step);
         let order = self.scheme.order() as f64;
         let tol = (&tol.rtol[..], &tol.atol[..]);
