@@ -136,6 +136,17 @@
 //! −20 %, the lattice's lobatto3 at 1e-6 and 1e-8 −4 % and −5 %, its lobatto4 at 1e-8
 //! +6 %; the final errors stay below 0.2 times the tolerance, as before.
 //!
+//! **Output times.** The dense output between two steps is the cubic Hermite interpolant
+//! of their ends (order 4 in `q`, 3 in `v`), which a scheme of order above 4 outruns: at
+//! tol 1e-10 lobatto7's steps ended within 3e-13 of the exact state while its interpolated
+//! outputs were off by 1.5e-3 (damped oscillator, 1001 output times, measured). So in a run
+//! with [`output::Samples`](crate::output::Samples), an accepted step over the next output
+//! time is checked: where the interpolant differs from the step polynomial at an interior
+//! node by more than `atol + rtol |·|` (in `q` or `v`), the step is taken again, cut to end
+//! on the output time, whose state is then a step's end. This costs up to one step more per
+//! output time (every step, with outputs closer than the steps); a fixed-step run
+//! interpolates at the step the caller chose.
+//!
 //! **The first step** ([`crate::Integrator::adaptive`]): Hairer, Nørsett & Wanner's
 //! algorithm (*Solving ODEs I*, II.4) on `y = (q, p)`, `f = (v, L_q + F)`:
 //! `h₀ = 0.01 ‖y₀‖ / ‖f₀‖`, one explicit Euler step of `h₀` for `‖f'‖`, and

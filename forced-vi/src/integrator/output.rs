@@ -84,7 +84,9 @@ pub struct Final;
 /// The dense output at each of the given times (see [`DenseState`]), so that the step grid,
 /// fixed or adaptive, is free of the output grid. The times must be finite and non-negative
 /// ([`Error::InvalidOutputTime`] otherwise), non-decreasing and at most `t_final`
-/// ([`Error::UnorderedTimes`] otherwise). Only the last step is
+/// ([`Error::UnorderedTimes`] otherwise). An adaptive run keeps the samples to its
+/// tolerance, ending a step on an output time where interpolation would miss it (see
+/// [`DenseState`]). Only the last step is
 /// held, so memory grows with the samples, not the steps. On failure the samples before it
 /// come back in [`RunFailure::samples`].
 #[derive(Clone, Copy, Debug)]
@@ -231,6 +233,7 @@ impl<const N: usize> Output<N> for Samples<'_> {
         open(integ, init, t_final, |stepper| {
             let mut out = Vec::with_capacity(times.len());
             let mut prev: Option<StepRecord<N>> = None;
+            stepper.set_next_output(times.first().copied());
             while let Some(rec) = stepper.next() {
                 let rec = match rec {
                     Ok(r) => r,
@@ -246,6 +249,7 @@ impl<const N: usize> Output<N> for Samples<'_> {
                         None => hermite(&rec, &rec, t),
                     });
                 }
+                stepper.set_next_output(times.get(out.len()).copied());
                 prev = Some(rec);
             }
             Ok(out)

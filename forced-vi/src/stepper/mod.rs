@@ -222,6 +222,10 @@ pub struct Stepper<'a, M, const N: usize> {
     cforce: Vec<f64>,
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).
     tape: Option<Box<adjoint::Tape>>,
+    /// Adaptive runs with [`output::Samples`](crate::output::Samples): the next output
+    /// time, and a time the next step must end on (see `Stepper::interpolation_misses`).
+    stop: Option<f64>,
+    land: Option<f64>,
     /// The stack a step needs ([`step_stack_bytes`]).
     stack: usize,
     stats: RunStats,
@@ -317,6 +321,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// iterator's records then hold the state alone until [`Stepper::finish`].
     pub(crate) fn set_lean(&mut self, lean: bool) {
         self.lean = lean;
+    }
+
+    /// The next output time of the run, if any: an adaptive step over it whose dense output
+    /// would miss the tolerance there is taken again to end on it (see
+    /// `Stepper::interpolation_misses`).
+    pub(crate) fn set_next_output(&mut self, t: Option<f64>) {
+        self.stop = t;
     }
 
     /// The full record of the current state: the velocity solve and the energy. In a lean

@@ -129,6 +129,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             cforce: vec![0.0; N],
             stack,
             stats: RunStats::default(),
+            stop: None,
+            land: None,
             started: false,
             done: false,
         })
