@@ -223,9 +223,10 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).
     tape: Option<Box<adjoint::Tape>>,
     /// Adaptive runs with [`output::Samples`](crate::output::Samples): the next output
-    /// time, and a time the next step must end on (see `Stepper::interpolation_misses`).
+    /// time, and the longest step over one whose dense output meets the tolerance, as last
+    /// measured (see `Stepper::dense_output_misses`).
     stop: Option<f64>,
-    land: Option<f64>,
+    h_dense: f64,
     /// The stack a step needs ([`step_stack_bytes`]).
     stack: usize,
     stats: RunStats,
@@ -324,8 +325,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// The next output time of the run, if any: an adaptive step over it whose dense output
-    /// would miss the tolerance there is taken again to end on it (see
-    /// `Stepper::interpolation_misses`).
+    /// would miss the tolerance there is taken again, shorter or ending on it (see
+    /// `Stepper::dense_output_misses`).
     pub(crate) fn set_next_output(&mut self, t: Option<f64>) {
         self.stop = t;
     }

@@ -130,7 +130,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             stack,
             stats: RunStats::default(),
             stop: None,
-            land: None,
+            h_dense: f64::INFINITY,
             started: false,
             done: false,
         })
