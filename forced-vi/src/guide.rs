@@ -172,7 +172,9 @@
 //! `lagrangian = ..` and the force entries are Rust expressions over `f64` values:
 //!
 //! - arithmetic, with parameters and literals written as plain numbers (`0.5 * x`,
-//!   `x_dot * x_dot / 2`, `2 * x`: an integer literal is an `f64` where a number is meant);
+//!   `x_dot * x_dot / 2`, `2 * x`: an integer literal is an `f64` where a number is meant,
+//!   but arithmetic between integers is integer arithmetic, and a truncating `3 / 2` used as
+//!   a number is a compile error, see [Compile errors](#compile-errors));
 //! - the methods of num-dual's `DualNum`: `sin`, `cos`, `exp`, `ln`, `sqrt`, `powi`,
 //!   `powf`, `tanh`, `abs`, `mul_add`, ..., and `x.max(y)`, `x.min(y)`, `k.powf(x)`;
 //! - blocks with `let` (and `let mut`), `if`/`else` (on coordinates, parameters or `t`),
@@ -724,6 +726,18 @@
 //!     force(x = (omega * t).cos()),
 //! )]
 //! struct Driven { omega: f64, t: f64 }
+//! ```
+//!
+//! Integer arithmetic whose value a real number would not reproduce, used as a real number:
+//! arithmetic between integers stays integer arithmetic, as in Rust, so `3 / 2` is 1 where
+//! `3.0 / 2.0` is 1.5 (an overflow, such as `2147483647 * 2147483647 * 4`, is the same
+//! mistake). Write the numbers as reals, or `(3 / 2) as f64` for Rust's quotient; exact
+//! integer arithmetic (`4 / 2`, `7 % 4`, `2.pow(3)`) and indices (`q[i / 2]`) are fine:
+//!
+//! ```compile_fail
+//! use forced_vi::prelude::*;
+//! #[forced_lagrangian(coordinates(x), lagrangian = x_dot * x_dot * (3 / 2) - x)]
+//! struct Truncated {}
 //! ```
 //!
 //! An expression outside the supported forms (a macro call, a closure that is not an index

@@ -4,13 +4,13 @@
 use std::collections::BTreeSet;
 
 use proc_macro2::TokenStream;
-use quote::{quote, quote_spanned};
+use quote::{quote, quote_spanned, ToTokens};
 use syn::spanned::Spanned;
 use syn::{Expr, Ident, Lit};
 
 use super::control::pat_ident;
 use super::types::{var_degree, Local};
-use super::{compact, Degree, Idx, IntRange, Kind, Lowered, Lowerer, Var};
+use super::{compact, Degree, Idx, Inexact, IntRange, Kind, Lowered, Lowerer, Var};
 
 impl Lowerer<'_> {
     pub(super) fn method(&mut self, m: &syn::ExprMethodCall) -> Lowered {
@@ -66,6 +66,29 @@ impl Lowerer<'_> {
             let at = args.iter().map(|a| &a.tokens);
             out.kind = Kind::Int;
             out.degree = Degree::CONST;
+            out.inexact = std::iter::once(&recv)
+                .chain(&args)
+                .find_map(|a| a.inexact.clone());
+            if name == "pow" && out.inexact.is_none() {
+                // A power of known integers is folded; one that overflows is an error if
+                // its value is used as a real number.
+                let base = recv.int();
+                let exp = args.first().and_then(|a| a.int());
+                if let (Some(b), Some(e)) = (base, exp) {
+                    match u32::try_from(e).ok().and_then(|e| b.checked_pow(e)) {
+                        Some(v) => out.range = Some(IntRange::point(v)),
+                        None => {
+                            out.inexact = Some(Inexact::at(
+                                m,
+                                format!(
+                                    "`{}` overflows integer arithmetic, and its value is used here as a real number; write it with reals (`{b}.0_f64.powi({e})`)",
+                                    compact(&m.to_token_stream().to_string())
+                                ),
+                            ))
+                        }
+                    }
+                }
+            }
             out.tokens = quote!(#rt.#method(#(#at),*));
             return out;
         }
@@ -126,6 +149,7 @@ impl Lowerer<'_> {
                     names: BTreeSet::new(),
                     degree: Degree::CONST,
                     range: recv.range,
+                    inexact: None,
                 };
                 let body = self.repeated(&recv, ident, param, |l| l.expr(&c.body));
                 out.absorb(&body);
@@ -268,6 +292,10 @@ impl Lowerer<'_> {
         let mut out = inner.clone();
         out.kind = if is_float { Kind::Real } else { Kind::Int };
         out.lit_f64 = None;
+        if is_float {
+            // An explicit conversion: Rust's integer arithmetic is what the user asked for.
+            out.inexact = None;
+        }
         if is_float || inner.kind != Kind::Int {
             out.range = None;
         }

@@ -41,6 +41,7 @@ impl Lowerer<'_> {
                         out.degree = le.degree;
                         out.range = le.range;
                         out.lit_f64 = le.lit_f64;
+                        out.inexact = le.inexact.clone();
                         let t = if lift_tail && real {
                             le.as_real()
                         } else if lift_tail {
@@ -115,6 +116,7 @@ impl Lowerer<'_> {
                 names: le.names.clone(),
                 degree: le.degree,
                 range: le.range,
+                inexact: le.inexact.clone(),
             },
         );
         // With the parameters as duals, a value the user typed `f64` may be one.
@@ -347,6 +349,7 @@ impl Lowerer<'_> {
             names: BTreeSet::new(),
             degree: Degree::CONST,
             range: iter.range,
+            inexact: None,
         };
         let body = self.repeated(&iter, ident, param, |l| l.block(&f.body, false));
         let mut out = Lowered::new(TokenStream::new(), Kind::Unit);

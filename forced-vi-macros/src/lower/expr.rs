@@ -8,7 +8,7 @@ use syn::{BinOp, Expr, Lit, UnOp};
 
 use super::refine::int_op;
 use super::types::var_degree;
-use super::{Ctrl, Degree, Idx, IntRange, Kind, Lowered, Lowerer, Var, TIME};
+use super::{Ctrl, Degree, Idx, Inexact, IntRange, Kind, Lowered, Lowerer, Var, TIME};
 
 impl Lowerer<'_> {
     /// Lowers an expression.
@@ -108,6 +108,7 @@ impl Lowerer<'_> {
             l.names = local.names.clone();
             l.degree = local.degree;
             l.range = local.range;
+            l.inexact = local.inexact.clone();
             return l;
         }
         for (g, group) in self.env.groups.iter().enumerate() {
@@ -241,6 +242,21 @@ impl Lowerer<'_> {
         out.degree = arithmetic_degree(b.op, l.degree, r.degree);
         if out.kind == Kind::Int {
             out.range = int_op(b.op, l.range, r.range);
+            if matches!(b.op, BinOp::Div(_) | BinOp::Rem(_))
+                && r.range.and_then(|r| r.single()) == Some(0)
+            {
+                self.cx.error_spanned_by(
+                    b,
+                    format!(
+                        "`{}` divides by zero",
+                        super::compact(&b.to_token_stream().to_string())
+                    ),
+                );
+            }
+            out.inexact = l.inexact.clone().or_else(|| r.inexact.clone());
+            if out.inexact.is_none() {
+                out.inexact = inexact(b, l.range, r.range, out.range);
+            }
             // Integer arithmetic wraps instead of panicking: an index that wraps is out of
             // range, which the checked access reports.
             let fvi = quote!(::forced_vi::__private);
@@ -345,6 +361,17 @@ impl Lowerer<'_> {
         local.uses.extend(r.uses.iter().copied());
         local.names.extend(r.names.iter().cloned());
         local.range = None;
+        if lkind_is_int(&local.kind) {
+            let divides = matches!(op, Some(BinOp::DivAssign(_))).then(|| {
+                Inexact::at(
+                    right,
+                    format!(
+                        "`{name} /= ...` divides integers, which truncates as in Rust (`3 / 2` is 1); if `{name}` is used as a real number, make it one (`let mut {name} = 1.0;`)"
+                    ),
+                )
+            });
+            local.inexact = local.inexact.take().or(r.inexact.clone()).or(divides);
+        }
         local.degree = match op {
             None | Some(BinOp::AddAssign(_)) | Some(BinOp::SubAssign(_)) => {
                 local.degree.max(r.degree)
@@ -394,4 +421,43 @@ fn arithmetic_degree(op: BinOp, l: Degree, r: Degree) -> Degree {
         }
         _ => l.max(r).opaque(),
     }
+}
+
+/// Whether the integer arithmetic `b`, of operands in `l` and `r` with a result in `out`,
+/// may give a value that the same arithmetic on reals would not: a division that may
+/// truncate (or divide by zero), or a sum or product that overflows.
+fn inexact(
+    b: &syn::ExprBinary,
+    l: Option<IntRange>,
+    r: Option<IntRange>,
+    out: Option<IntRange>,
+) -> Option<Inexact> {
+    let text = super::compact(&b.to_token_stream().to_string());
+    let message = match b.op {
+        BinOp::Div(_) => {
+            let exact = matches!(
+                (l.and_then(|l| l.single()), r.and_then(|r| r.single())),
+                (Some(a), Some(d)) if d != 0 && a.checked_rem(d) == Some(0)
+            );
+            if exact {
+                return None;
+            }
+            format!(
+                "`{text}` divides integers, which truncates as in Rust (`3 / 2` is 1), and its value is used here as a real number; write the numbers as reals (`3.0 / 2.0`), or convert explicitly with `({text}) as f64`"
+            )
+        }
+        BinOp::Add(_) | BinOp::Sub(_) | BinOp::Mul(_)
+            if l.is_some() && r.is_some() && out.is_none() =>
+        {
+            format!(
+                "`{text}` overflows integer arithmetic, and its value is used here as a real number; write the numbers as reals (`2147483647.0`)"
+            )
+        }
+        _ => return None,
+    };
+    Some(Inexact::at(b, message))
+}
+
+fn lkind_is_int(k: &Kind) -> bool {
+    *k == Kind::Int
 }

@@ -40,7 +40,7 @@ mod refine;
 mod types;
 
 use types::Local;
-pub use types::{Degree, Env, Group, Idx, IntRange, Kind, Len, Lowered, Var};
+pub use types::{Degree, Env, Group, Idx, Inexact, IntRange, Kind, Len, Lowered, Var};
 
 /// The name of the time in model expressions.
 pub const TIME: &str = "t";
@@ -144,6 +144,7 @@ impl<'a> Lowerer<'a> {
                 names: BTreeSet::new(),
                 degree: Degree::CONST,
                 range,
+                inexact: None,
             },
         );
     }

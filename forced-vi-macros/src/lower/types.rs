@@ -193,6 +193,36 @@ pub struct Lowered {
     pub atomic: bool,
     /// The expression is itself a block, `if` or `for` (whole, so it can stand as a body).
     pub stmt_like: bool,
+    /// Integer arithmetic whose value differs from the same arithmetic on reals (a
+    /// truncating division, an overflow): an error if the integer is used as a real number.
+    pub inexact: Option<Inexact>,
+}
+
+/// Integer arithmetic that a real number would not reproduce, and where the user wrote it.
+///
+/// The macro reads an integer literal in real arithmetic as an `f64` (`v * v / 2`), but
+/// arithmetic between integers stays integer arithmetic, as in Rust (it indexes arrays):
+/// `3 / 2` is 1. Used as a real number, such a value would silently differ from what the
+/// same expression means next to a real, so [`Lowered::as_real`] makes it a compile error
+/// at these tokens instead; an explicit `as f64` keeps Rust's meaning.
+#[derive(Clone, Debug)]
+pub struct Inexact {
+    message: String,
+    /// The `compile_error!` spanned over the user's tokens.
+    error: TokenStream,
+}
+
+impl Inexact {
+    pub(super) fn at(tokens: impl ToTokens, message: String) -> Inexact {
+        let error = syn::Error::new_spanned(tokens, &message).to_compile_error();
+        Inexact { message, error }
+    }
+}
+
+impl PartialEq for Inexact {
+    fn eq(&self, o: &Inexact) -> bool {
+        self.message == o.message
+    }
 }
 
 impl Lowered {
@@ -207,6 +237,7 @@ impl Lowered {
             lit_f64: None,
             atomic: true,
             stmt_like: false,
+            inexact: None,
         }
     }
     /// The compile-time value of an integer, if it has a single one.
@@ -232,6 +263,9 @@ impl Lowered {
     pub fn as_real(&self) -> TokenStream {
         if self.kind != Kind::Int {
             return self.operand();
+        }
+        if let Some(x) = &self.inexact {
+            return x.error.clone();
         }
         if let Some(t) = self
             .lit_f64
@@ -277,6 +311,7 @@ pub(super) struct Local {
     pub(super) names: BTreeSet<String>,
     pub(super) degree: Degree,
     pub(super) range: Option<IntRange>,
+    pub(super) inexact: Option<Inexact>,
 }
 
 impl Local {
@@ -300,6 +335,7 @@ impl Local {
                 v: grow(self.degree.v, o.degree.v),
             },
             range: join_range(self.range, o.range),
+            inexact: self.inexact.clone().or_else(|| o.inexact.clone()),
         }
     }
 }
