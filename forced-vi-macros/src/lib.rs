@@ -57,8 +57,24 @@ use proc_macro::TokenStream;
 /// code names `forced_vi`'s paths.
 #[proc_macro_attribute]
 pub fn forced_lagrangian(args: TokenStream, item: TokenStream) -> TokenStream {
-    entry(args.into(), item.into()).into()
+    expand_on_own_stack(args.into(), item.into()).into()
 }
+
+/// [`entry`] on a stack of [`EXPANSION_STACK`] bytes.
+fn expand_on_own_stack(
+    args: proc_macro2::TokenStream,
+    item: proc_macro2::TokenStream,
+) -> proc_macro2::TokenStream {
+    stacker::grow(EXPANSION_STACK, || entry(args, item))
+}
+
+/// The stack the expansion runs on. Parsing, checking and lowering recurse over the
+/// expression tree, and a Lagrangian of a few thousand terms (`a + b + c + ...`, as a
+/// computer algebra system writes one) is a tree a few thousand levels deep: 2000 terms
+/// overflowed the compiler's own stack (rustc aborts with SIGSEGV), where plain Rust compiles
+/// the same sum. The memory is reserved, not used: the pages a shallow model never reaches
+/// are never touched.
+const EXPANSION_STACK: usize = 1 << 30;
 
 fn entry(
     args: proc_macro2::TokenStream,
@@ -106,7 +122,7 @@ mod tests {
 
     #[test]
     fn expands_the_paper_model() {
-        let out = super::entry(
+        let out = super::expand_on_own_stack(
             quote!(
                 coordinates(x, y),
                 lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot)
@@ -130,6 +146,24 @@ mod tests {
         // All of the paper's model is polynomial: no dual numbers in its kernels.
         assert!(!out.contains("term_hessian"));
         assert!(!out.contains("force_row"));
+    }
+
+    /// A sum of 800 terms is a tree 800 levels deep: on the 2 MiB stack of a test thread
+    /// (rustc's own was overflowed by 2000 terms), the expansion needs the stack it makes.
+    #[test]
+    fn a_lagrangian_of_hundreds_of_terms_expands() {
+        let terms = (0..800).map(|k| {
+            let k = k as f64;
+            quote!(+ #k * x * y)
+        });
+        let out = super::expand_on_own_stack(
+            quote!(coordinates(x, y), lagrangian = x_dot * x_dot + y_dot * y_dot #(#terms)*),
+            quote!(
+                struct Long {}
+            ),
+        )
+        .to_string();
+        assert!(!out.contains("compile_error"));
     }
 
     fn expand(args: proc_macro2::TokenStream) -> String {
