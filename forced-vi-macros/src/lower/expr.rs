@@ -229,7 +229,7 @@ impl Lowerer<'_> {
         let mut l = self.expr(&b.left);
         let mut r = self.expr(&b.right);
         let op = &b.op;
-        let span = b.span();
+        let span = first_span(&b.left);
         let mut out = Lowered::new(TokenStream::new(), Kind::Real);
         out.absorb(&l);
         out.absorb(&r);
@@ -432,7 +432,7 @@ fn inexact(
     r: Option<IntRange>,
     out: Option<IntRange>,
 ) -> Option<Inexact> {
-    let text = super::compact(&b.to_token_stream().to_string());
+    let text = || super::compact(&b.to_token_stream().to_string());
     let message = match b.op {
         BinOp::Div(_) => {
             let exact = matches!(
@@ -442,6 +442,7 @@ fn inexact(
             if exact {
                 return None;
             }
+            let text = text();
             format!(
                 "`{text}` divides integers, which truncates as in Rust (`3 / 2` is 1), and its value is used here as a real number; write the numbers as reals (`3.0 / 2.0`), or convert explicitly with `({text}) as f64`"
             )
@@ -449,6 +450,7 @@ fn inexact(
         BinOp::Add(_) | BinOp::Sub(_) | BinOp::Mul(_)
             if l.is_some() && r.is_some() && out.is_none() =>
         {
+            let text = text();
             format!(
                 "`{text}` overflows integer arithmetic, and its value is used here as a real number; write the numbers as reals (`2147483647.0`)"
             )
@@ -460,4 +462,32 @@ fn inexact(
 
 fn lkind_is_int(k: &Kind) -> bool {
     *k == Kind::Int
+}
+
+/// The span of the first token of `e`, as `e.span()` gives it on stable Rust (which cannot
+/// join spans), without printing `e` to tokens: that costs the size of `e`, and at every
+/// operator of a long sum it made the expansion quadratic in the number of terms (800 terms
+/// took 3 s, 3000 took 47 s).
+fn first_span(e: &Expr) -> proc_macro2::Span {
+    let mut e = e;
+    loop {
+        e = match e {
+            Expr::Binary(b) => &b.left,
+            Expr::MethodCall(m) => &m.receiver,
+            Expr::Index(i) => &i.expr,
+            Expr::Cast(c) => &c.expr,
+            Expr::Field(f) => &f.base,
+            Expr::Call(c) => &c.func,
+            Expr::Range(syn::ExprRange { start: Some(s), .. }) => s,
+            Expr::Paren(p) if p.attrs.is_empty() => return p.paren_token.span.open(),
+            Expr::Lit(l) if l.attrs.is_empty() => return l.lit.span(),
+            Expr::Path(p) if p.attrs.is_empty() && p.qself.is_none() => {
+                if let Some(s) = p.path.segments.first() {
+                    return s.ident.span();
+                }
+                return e.span();
+            }
+            other => return other.span(),
+        };
+    }
 }
