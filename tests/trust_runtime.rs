@@ -681,3 +681,61 @@ fn trust_a_broken_constraint_promise_is_refused() {
     const { assert!(!<CoupledVanDerPol as ForcedLagrangian<2>>::CONSTRAINED) };
     const { assert!(<CartesianPendulum as ForcedLagrangian<2>>::CONSTRAINED) };
 }
+
+/// `Damped` with a parameter list whose names and values disagree in length.
+struct MislistedParameters {
+    values: usize,
+}
+
+impl ForcedLagrangian<1> for MislistedParameters {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (v[0] * v[0] - q[0] * q[0]) * 0.5
+    }
+    fn parameter_names(&self) -> &'static [&'static str] {
+        &["k"]
+    }
+    fn parameter_values(&self) -> Vec<f64> {
+        vec![1.0; self.values]
+    }
+}
+
+/// A hand-written model with one parameter name and another number of values is refused
+/// before any step, for forward sensitivities and adjoints alike (it ran, with as many
+/// derivative columns as values).
+#[test]
+fn trust_parameter_names_and_values_must_agree() {
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    for values in [0, 2, 1000] {
+        let model = MislistedParameters { values };
+        let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
+        let f = integ.solve(init, 0.1, output::Tangents).unwrap_err();
+        assert!(
+            matches!(f.error, Error::InvalidModel { .. }),
+            "{values}: {}",
+            f.error
+        );
+        let f = integ
+            .solve(
+                init,
+                0.1,
+                output::adjoint(|_| (Default::default(), Default::default())),
+            )
+            .unwrap_err();
+        assert!(
+            matches!(f.error, Error::InvalidModel { .. }),
+            "{values}: {}",
+            f.error
+        );
+        assert_eq!(f.stats.steps, 0, "{values}: refused before the first step");
+    }
+    let model = MislistedParameters { values: 1 };
+    let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
+    assert_eq!(
+        integ
+            .solve(init, 0.1, output::Tangents)
+            .unwrap()
+            .wrt_parameters
+            .ncols(),
+        1
+    );
+}

@@ -324,7 +324,7 @@ where
         refuse_constraints(integ)?;
         open(integ, init, t_final, |stepper| {
             stepper.set_lean(true);
-            stepper.keep_tape();
+            stepper.keep_tape().map_err(|e| stepper.failure(e))?;
             let end = to_the_end(stepper)?;
             let (stats, tape_bytes) = (end.stats, stepper.tape_bytes());
             let (gq, gv) = (self.0)(&end);

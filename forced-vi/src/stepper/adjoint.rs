@@ -54,8 +54,9 @@ impl Tape {
 
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// Starts keeping the steps of the run for [`Self::adjoint`]. Only before the first
-    /// step.
-    pub(crate) fn keep_tape(&mut self) {
+    /// step. Refuses a model whose parameter lists disagree before any step is taken.
+    pub(crate) fn keep_tape(&mut self) -> Result<(), Error> {
+        super::checks::parameter_values(self.model)?;
         let width = 2 + 2 * N + self.backend.z().len();
         self.tape = Some(Box::new(Tape {
             data: Vec::new(),
@@ -63,6 +64,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             saved: 0,
             start: (self.state.q.sum.clone(), self.state.v.clone()),
         }));
+        Ok(())
     }
 
     /// Keeps the step just solved (the backend still holds it).
@@ -98,7 +100,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let Some(tape) = self.tape.take() else {
             return Ok((DVector::zeros(2 * N), DVector::zeros(0)));
         };
-        let theta = self.model.parameter_values();
+        let theta = super::checks::parameter_values(self.model)?;
         let np = theta.len();
         let mut grad_theta = vec![0.0; np];
         let sch = self.scheme;

@@ -56,6 +56,26 @@ pub(super) fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
     Ok(())
 }
 
+/// The model's parameter values `θ`, one per name of
+/// [`ForcedLagrangian::parameter_names`]: a hand-written model whose two lists differ in
+/// length is refused (its derivatives would have as many columns as values, named by
+/// fewer or more names).
+pub(super) fn parameter_values<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+) -> Result<Vec<f64>, Error> {
+    let (names, theta) = (model.parameter_names(), model.parameter_values());
+    if names.len() != theta.len() {
+        return Err(Error::InvalidModel {
+            message: format!(
+                "parameter_names has {} entries but parameter_values {}: one value per name",
+                names.len(),
+                theta.len()
+            ),
+        });
+    }
+    Ok(theta)
+}
+
 /// The number of steps of size `h` (the last one shortened) that reach `t_final`.
 ///
 /// A ratio within 1e-10 of an integer is that integer, so that `t_final = n·h` does not

@@ -69,7 +69,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     pub(crate) fn track_tangent(&mut self) -> Result<(), Error> {
         let s = self.scheme.stages();
         let dim = self.backend.z().len();
-        let theta = self.model.parameter_values();
+        let theta = super::checks::parameter_values(self.model)?;
         let np = theta.len();
         let cols = 2 * N + np;
         let mut m = vec![0.0; 2 * N * cols];
