@@ -11,7 +11,7 @@ pub(super) fn errors() -> Vec<(usize, f64, f64)> {
         let f: Vec<&str> = line.split(',').collect();
         let (s, k): (usize, usize) = (f[0].parse().unwrap(), f[1].parse().unwrap());
         let (x, w): (f64, f64) = (f[2].parse().unwrap(), f[3].parse().unwrap());
-        let (xs, ws) = lobatto_nodes_weights(s);
+        let (xs, ws) = coefficients::nodes_weights(s);
         let ex = (xs[k] - x).abs();
         let ew = (ws[k] - w).abs() / w;
         match out.last_mut() {

@@ -1,5 +1,8 @@
 //! The coefficients behind a scheme: the Lagrange basis on the control points, and
-//! Gauss–Lobatto nodes and weights to full `f64` precision for any number of points.
+//! Gauss–Lobatto nodes and weights to full `f64` precision for any supported number of
+//! points.
+
+use crate::error::SchemeError;
 
 /// `ℓ_j(x)` on the nodes `d`.
 pub(super) fn lagrange(d: &[f64], j: usize, x: f64) -> f64 {
@@ -59,8 +62,24 @@ fn legendre(n: usize, x: f64) -> (f64, f64) {
 /// Chebyshev–Lobatto points; the weights are `2 / (n(n+1) P_n(x)²)` on `[−1, 1]`.
 /// Results are made exactly symmetric about ½.
 ///
-/// For `s < 2` the two-point rule is returned.
-pub fn lobatto_nodes_weights(s: usize) -> (Vec<f64>, Vec<f64>) {
+/// `s` runs from 2 to `MAX_STAGES + 1` (the points of the error reference of
+/// `lobatto(MAX_STAGES)`); other counts are a [`SchemeError`] (the work grows like `s²`, and
+/// a count from user input should not decide it unchecked).
+pub fn lobatto_nodes_weights(s: usize) -> Result<(Vec<f64>, Vec<f64>), SchemeError> {
+    if s < 2 {
+        return Err(SchemeError::TooFewStages(s));
+    }
+    if s > super::MAX_STAGES + 1 {
+        return Err(SchemeError::TooManyStages {
+            requested: s,
+            max: super::MAX_STAGES + 1,
+        });
+    }
+    Ok(nodes_weights(s))
+}
+
+/// [`lobatto_nodes_weights`] for an `s` the caller has checked (`s ≥ 2`).
+pub(super) fn nodes_weights(s: usize) -> (Vec<f64>, Vec<f64>) {
     let s = s.max(2);
     let n = s - 1;
     let nf = n as f64;

@@ -175,7 +175,7 @@ impl Scheme {
     /// once per process and shared (see [`LOBATTO_TABLES`]).
     fn lobatto_tables(s: usize) -> Self {
         let make = || {
-            let (x, w) = lobatto_nodes_weights(s);
+            let (x, w) = coefficients::nodes_weights(s);
             Self::from_coefficients(SchemeId::Lobatto(s), x.clone(), x, w)
         };
         match LOBATTO_TABLES.get(s) {
@@ -320,14 +320,28 @@ impl Scheme {
     pub fn b(&self) -> &[f64] {
         &self.t.b
     }
-    /// `Φ_ij = ℓ_j(c_i)`.
+    /// `Φ_ij = ℓ_j(c_i)`, for `i` below [`Self::quadrature_nodes`] and `j` below
+    /// [`Self::stages`]; `None` outside.
+    pub fn phi(&self, i: usize, j: usize) -> Option<f64> {
+        let len = self.t.d.len();
+        let k = i.checked_mul(len)?.checked_add(j).filter(|_| j < len)?;
+        self.t.phi.get(k).copied()
+    }
+    /// `Ψ_ij = ℓ_j'(c_i)`, for `i` below [`Self::quadrature_nodes`] and `j` below
+    /// [`Self::stages`]; `None` outside.
+    pub fn psi(&self, i: usize, j: usize) -> Option<f64> {
+        let len = self.t.d.len();
+        let k = i.checked_mul(len)?.checked_add(j).filter(|_| j < len)?;
+        self.t.psi.get(k).copied()
+    }
+    /// [`Self::phi`] at indices the caller keeps in range.
     #[inline]
-    pub fn phi(&self, i: usize, j: usize) -> f64 {
+    pub(crate) fn phi_at(&self, i: usize, j: usize) -> f64 {
         self.t.phi[i * self.t.d.len() + j]
     }
-    /// `Ψ_ij = ℓ_j'(c_i)`.
+    /// [`Self::psi`] at indices the caller keeps in range.
     #[inline]
-    pub fn psi(&self, i: usize, j: usize) -> f64 {
+    pub(crate) fn psi_at(&self, i: usize, j: usize) -> f64 {
         self.t.psi[i * self.t.d.len() + j]
     }
     /// `(Φ_i·, Ψ_i·)`: row `i` of each, `s` entries.

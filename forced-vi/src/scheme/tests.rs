@@ -11,18 +11,18 @@ fn close(a: &[f64], b: &[f64], tol: f64) {
 
 #[test]
 fn lobatto_known_values() {
-    let (x, w) = lobatto_nodes_weights(2);
+    let (x, w) = lobatto_nodes_weights(2).unwrap();
     close(&x, &[0.0, 1.0], 0.0);
     close(&w, &[0.5, 0.5], 1e-16);
-    let (x, w) = lobatto_nodes_weights(3);
+    let (x, w) = lobatto_nodes_weights(3).unwrap();
     close(&x, &[0.0, 0.5, 1.0], 0.0);
     close(&w, &[1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0], 2e-16);
     let r5 = 1.0 / 5f64.sqrt();
-    let (x, w) = lobatto_nodes_weights(4);
+    let (x, w) = lobatto_nodes_weights(4).unwrap();
     close(&x, &[0.0, 0.5 * (1.0 - r5), 0.5 * (1.0 + r5), 1.0], 2e-16);
     close(&w, &[1.0 / 12.0, 5.0 / 12.0, 5.0 / 12.0, 1.0 / 12.0], 2e-16);
     let r37 = (3.0f64 / 7.0).sqrt();
-    let (x, w) = lobatto_nodes_weights(5);
+    let (x, w) = lobatto_nodes_weights(5).unwrap();
     close(
         &x,
         &[0.0, 0.5 * (1.0 - r37), 0.5, 0.5 * (1.0 + r37), 1.0],
@@ -44,7 +44,7 @@ fn lobatto_known_values() {
 #[test]
 fn lobatto_quadrature_is_exact_to_degree_2s_minus_3() {
     for s in 2..=9 {
-        let (x, w) = lobatto_nodes_weights(s);
+        let (x, w) = lobatto_nodes_weights(s).unwrap();
         for deg in 0..=(2 * s - 3) {
             let q: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(deg as i32)).sum();
             let exact = 1.0 / (deg as f64 + 1.0);
@@ -58,8 +58,8 @@ fn basis_derivative_rows_sum_to_zero() {
     for s in 2..=6 {
         let sch = Scheme::lobatto(s).unwrap();
         for i in 0..sch.quadrature_nodes() {
-            let sp: f64 = (0..s).map(|j| sch.psi(i, j)).sum();
-            let sf: f64 = (0..s).map(|j| sch.phi(i, j)).sum();
+            let sp: f64 = (0..s).map(|j| sch.psi_at(i, j)).sum();
+            let sf: f64 = (0..s).map(|j| sch.phi_at(i, j)).sum();
             assert!(sp.abs() < 1e-12 && (sf - 1.0).abs() < 1e-14);
         }
     }
@@ -166,14 +166,52 @@ fn lobatto_tables_are_made_once_up_to_the_cached_stages() {
         // Shared below the bound, made per scheme above it; the same values either way.
         assert_eq!(Arc::ptr_eq(&a.t, &b.t), s <= CACHED_STAGES, "s = {s}");
         assert_eq!((a.d(), a.b()), (b.d(), b.b()));
-        let (x, w) = lobatto_nodes_weights(s);
+        let (x, w) = lobatto_nodes_weights(s).unwrap();
         assert_eq!((a.d(), a.b()), (&x[..], &w[..]), "s = {s}");
         // The error reference: lobatto(s + 1), from the cache where it is there too.
         let r = a.error_reference();
         assert_eq!(r.id(), SchemeId::Lobatto(s + 1));
-        assert_eq!(r.d(), &lobatto_nodes_weights(s + 1).0[..]);
+        assert_eq!(r.d(), &lobatto_nodes_weights(s + 1).unwrap().0[..]);
         if s < CACHED_STAGES {
             assert!(Arc::ptr_eq(&r.t, &Scheme::lobatto(s + 1).unwrap().t));
         }
+    }
+}
+
+/// The public node function refuses counts outside the supported range instead of doing
+/// `s²` work (or allocating) for any count it is given.
+#[test]
+fn lobatto_nodes_weights_refuses_counts_out_of_range() {
+    assert!(matches!(
+        lobatto_nodes_weights(0),
+        Err(SchemeError::TooFewStages(0))
+    ));
+    assert!(matches!(
+        lobatto_nodes_weights(1),
+        Err(SchemeError::TooFewStages(1))
+    ));
+    assert!(lobatto_nodes_weights(MAX_STAGES + 1).is_ok());
+    for s in [MAX_STAGES + 2, 1 << 20, usize::MAX] {
+        assert!(
+            matches!(
+                lobatto_nodes_weights(s),
+                Err(SchemeError::TooManyStages { .. })
+            ),
+            "{s}"
+        );
+    }
+}
+
+/// The public basis accessors answer `None` outside the tables instead of reading a
+/// neighbouring entry (`phi(0, 3)` of a 3-point scheme was `Φ_10`).
+#[test]
+fn basis_accessors_are_checked() {
+    let sch = Scheme::lobatto(3).unwrap();
+    let (r, s) = (sch.quadrature_nodes(), sch.stages());
+    assert_eq!(sch.phi(0, 0), Some(sch.phi_at(0, 0)));
+    assert_eq!(sch.psi(r - 1, s - 1), Some(sch.psi_at(r - 1, s - 1)));
+    for (i, j) in [(0, s), (r, 0), (usize::MAX, 0), (0, usize::MAX)] {
+        assert_eq!(sch.phi(i, j), None, "({i}, {j})");
+        assert_eq!(sch.psi(i, j), None, "({i}, {j})");
     }
 }

@@ -160,8 +160,8 @@ impl<'a> SparseStep<'a> {
                 let za = &z[a * s1..(a + 1) * s1];
                 let (mut xa, mut va) = (self.q0[a], 0.0);
                 for (m, &zm) in za.iter().enumerate() {
-                    xa += sch.phi(i, m + 1) * zm;
-                    va += sch.psi(i, m + 1) * zm;
+                    xa += sch.phi_at(i, m + 1) * zm;
+                    va += sch.psi_at(i, m + 1) * zm;
                 }
                 x[a] = xa;
                 v[a] = va * inv_h;
@@ -212,8 +212,8 @@ impl SparseSystem for SparseStep<'_> {
                 let mut g = if j == 0 { self.p0[a] } else { 0.0 };
                 for i in 0..sch.quadrature_nodes() {
                     let bi = sch.b()[i];
-                    g += bi * h * sch.phi(i, j) * self.fq[i * n + a]
-                        + bi * sch.psi(i, j) * self.lv[i * n + a];
+                    g += bi * h * sch.phi_at(i, j) * self.fq[i * n + a]
+                        + bi * sch.psi_at(i, j) * self.lv[i * n + a];
                 }
                 r[a * s1 + j] = g;
             }

@@ -244,7 +244,7 @@ fn transposed_gradients<B: StepBackend>(
         fi.fill(0.0);
         li.fill(0.0);
         for j in 0..s {
-            let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+            let (cf, cl) = (bi * h * sch.phi_at(i, j), bi * sch.psi_at(i, j));
             for a in 0..n {
                 fi[a] += cf * mu[j * n + a];
                 li[a] += cl * mu[j * n + a];
@@ -252,7 +252,7 @@ fn transposed_gradients<B: StepBackend>(
         }
         backend.apply_node_transposed(i, (fi, li), ux, uv);
         for m in 0..s {
-            let (phi, psi) = (sch.phi(i, m), sch.psi(i, m) / h);
+            let (phi, psi) = (sch.phi_at(i, m), sch.psi_at(i, m) / h);
             for a in 0..n {
                 u[m * n + a] += phi * ux[a] + psi * uv[a];
             }

@@ -205,7 +205,7 @@ fn linearized_gradients(
         dxi.fill(0.0);
         dvi.fill(0.0);
         for m in 0..s {
-            let (phi, psi) = (sch.phi(i, m), sch.psi(i, m) / h);
+            let (phi, psi) = (sch.phi_at(i, m), sch.psi_at(i, m) / h);
             for a in 0..n {
                 dxi[a] += phi * dx[m * n + a];
                 dvi[a] += psi * dx[m * n + a];
@@ -221,7 +221,7 @@ fn linearized_gradients(
         }
         let bi = sch.b()[i];
         for j in 0..s {
-            let (cf, cl) = (bi * h * sch.phi(i, j), bi * sch.psi(i, j));
+            let (cf, cl) = (bi * h * sch.phi_at(i, j), bi * sch.psi_at(i, j));
             for a in 0..n {
                 g[j * n + a] += cf * dfq[a] + cl * dlv[a];
             }
