@@ -739,3 +739,41 @@ fn trust_parameter_names_and_values_must_agree() {
         1
     );
 }
+
+/// A damped model that says it has no force.
+struct ForceUnderFalseFlag;
+
+impl ForcedLagrangian<1> for ForceUnderFalseFlag {
+    const STRUCTURE: forced_vi::Structure = forced_vi::Structure {
+        has_force: false,
+        force_uses_velocity: false,
+        ..forced_vi::Structure::GENERAL
+    };
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (v[0] * v[0] - q[0] * q[0]) * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * 0.3]
+    }
+}
+
+/// `STRUCTURE.has_force: false` under a force that is not zero is refused before the first
+/// step, on every path (the integrator left the force out and returned the undamped motion
+/// in an `Ok`).
+#[test]
+fn trust_a_force_under_a_false_has_force_flag_is_refused() {
+    let model = ForceUnderFalseFlag;
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    let fixed = Integrator::new(&model, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
+    let adaptive = Integrator::adaptive(&model, Scheme::lobatto(4).unwrap(), 1e-8, 1e-8).unwrap();
+    for integ in [&fixed, &adaptive] {
+        let f = integ.final_state(init, 5.0).unwrap_err();
+        assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
+        assert_eq!(f.stats.steps, 0);
+    }
+    // Even from rest, where this force vanishes: it is checked beside the initial state.
+    let f = fixed
+        .final_state(InitialState::from_velocity([1.0], [0.0]), 5.0)
+        .unwrap_err();
+    assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
+}

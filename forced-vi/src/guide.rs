@@ -424,7 +424,11 @@
 //! The attribute proves each claim from the expressions and claims nothing it cannot prove:
 //! a value that depends on a condition on the coordinates, or changes in a loop, counts as
 //! varying. A hand-written model starts from [`Structure::GENERAL`], which promises nothing;
-//! a wrong promise gives wrong results, so claim only what holds.
+//! a wrong promise gives wrong results, so claim only what holds. Two promises are checked
+//! at the first step, at the initial state and beside it: `uses_time: false` under an `L`
+//! or `F` that changes with `t`, and `has_force: false` under a force that is not zero, are
+//! refused with [`Error::InvalidModel`] (a wrong `constant_mass` or `force_uses_velocity`
+//! changes only the Newton iteration's Jacobian, whose residual is exact).
 //!
 //! Beside `STRUCTURE`, [`ForcedLagrangian::CONSTRAINED`] is `false` for every model without
 //! `constraints(...)`: the integrator then compiles none of a constrained step's code for it

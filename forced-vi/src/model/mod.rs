@@ -24,7 +24,8 @@ pub use sparse_node::{Block, ConstraintSink, NodeBlocks, NodePattern, NodeSink, 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Structure {
-    /// The model has a non-conservative force.
+    /// The model has a non-conservative force. (`false` under a force that is not zero at
+    /// the initial state, or beside it, is refused by [`crate::Integrator`]'s first step.)
     pub has_force: bool,
     /// The force depends on the velocities (so `∂F/∂v` is not zero).
     pub force_uses_velocity: bool,

@@ -56,6 +56,39 @@ pub(super) fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
     Ok(())
 }
 
+/// Refuses a model that has a force but says it has none (`STRUCTURE.has_force` false
+/// while `force` or `force_at` is not zero): the integrator would leave the force out and
+/// return the conservative motion (measured on a hand-written damped model: an `Ok` at
+/// q = -1.20 where the damped motion is at -0.83). Checked, like the time flag, at the
+/// initial state and at states and times beside it: a force that vanishes there and
+/// nowhere else is not caught.
+pub(super) fn check_force_flag<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &[f64],
+    v: &[f64],
+) -> Result<(), Error> {
+    if M::STRUCTURE.has_force {
+        return Ok(());
+    }
+    let (Ok(qa), Ok(va)) = (<&[f64; N]>::try_from(q), <&[f64; N]>::try_from(v)) else {
+        return Ok(());
+    };
+    let beside: [f64; N] = std::array::from_fn(|i| 0.75 * qa[i] + 0.5);
+    let moving: [f64; N] = std::array::from_fn(|i| va[i] + 1.0);
+    for (qs, vs) in [(qa, va), (&beside, &moving)] {
+        let mut forces = vec![model.force::<f64>(qs, vs)];
+        if M::STRUCTURE.uses_time {
+            forces.extend([0.7390851332151607, -2.5].map(|t| model.force_at::<f64>(t, qs, vs)));
+        }
+        if forces.iter().flatten().any(|f| *f != 0.0) {
+            return Err(Error::InvalidModel {
+                message: "force is not zero, but STRUCTURE.has_force is false".into(),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// The model's parameter values `θ`, one per name of
 /// [`ForcedLagrangian::parameter_names`]: a hand-written model whose two lists differ in
 /// length is refused (its derivatives would have as many columns as values, named by

@@ -1,7 +1,9 @@
 //! The start of a run: the checks of the run and of the initial data, `p_0` or `v_0` from
 //! the other (DESIGN §3), and the stepper's first state.
 
-use super::checks::{check_finite, check_run, check_time_flag, non_finite, step_count};
+use super::checks::{
+    check_finite, check_force_flag, check_run, check_time_flag, non_finite, step_count,
+};
 use super::state::State;
 use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
 use crate::backend::{Backend, StepBackend};
@@ -84,6 +86,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             crate::initial::check_constraints(&state.q.sum, &state.v, residuals)?;
         }
         check_time_flag(model, &state.q.sum, &state.v)?;
+        check_force_flag(model, &state.q.sum, &state.v)?;
         let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
         let energy0 = energy(model, 0.0, q0, v0, p0)
             .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
