@@ -777,3 +777,49 @@ fn trust_a_force_under_a_false_has_force_flag_is_refused() {
         .unwrap_err();
     assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
 }
+
+/// `L = ½(1 + q²)v² − ½q²`, `F = −0.3 v`, under the flags `S`.
+struct VaryingMass<const LIE_MASS: bool, const LIE_VELOCITY: bool>;
+
+impl<const LIE_MASS: bool, const LIE_VELOCITY: bool> ForcedLagrangian<1>
+    for VaryingMass<LIE_MASS, LIE_VELOCITY>
+{
+    const STRUCTURE: forced_vi::Structure = forced_vi::Structure {
+        constant_mass: LIE_MASS,
+        force_uses_velocity: !LIE_VELOCITY,
+        ..forced_vi::Structure::GENERAL
+    };
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (q[0] * q[0] + 1.0) * v[0] * v[0] * 0.5 - q[0] * q[0] * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * 0.3]
+    }
+}
+
+/// `constant_mass: true` under a varying mass and `force_uses_velocity: false` under a
+/// velocity-dependent force are refused before the first step: the sensitivities left `C`
+/// or `∂F/∂v` out and came back wrong in an `Ok`.
+#[test]
+fn trust_false_mass_and_velocity_flags_are_refused() {
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    let honest = VaryingMass::<false, false>;
+    let integ = Integrator::new(&honest, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
+    let exact = integ.solve(init, 2.0, output::Tangents).unwrap();
+    let lie_mass = VaryingMass::<true, false>;
+    let lie_velocity = VaryingMass::<false, true>;
+    let a = Integrator::new(&lie_mass, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
+    let b = Integrator::new(&lie_velocity, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
+    for f in [
+        a.solve(init, 2.0, output::Tangents).map(|s| s.wrt_initial),
+        b.solve(init, 2.0, output::Tangents).map(|s| s.wrt_initial),
+    ] {
+        match f {
+            Err(f) => assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error),
+            Ok(m) => panic!(
+                "a false flag ran: sensitivities off by {:e}",
+                (m - &exact.wrt_initial).amax()
+            ),
+        }
+    }
+}

@@ -424,11 +424,14 @@
 //! The attribute proves each claim from the expressions and claims nothing it cannot prove:
 //! a value that depends on a condition on the coordinates, or changes in a loop, counts as
 //! varying. A hand-written model starts from [`Structure::GENERAL`], which promises nothing;
-//! a wrong promise gives wrong results, so claim only what holds. Two promises are checked
-//! at the first step, at the initial state and beside it: `uses_time: false` under an `L`
-//! or `F` that changes with `t`, and `has_force: false` under a force that is not zero, are
-//! refused with [`Error::InvalidModel`] (a wrong `constant_mass` or `force_uses_velocity`
-//! changes only the Newton iteration's Jacobian, whose residual is exact).
+//! a wrong promise gives wrong results, so claim only what holds. The integrator's first
+//! step checks each promise at the initial state and beside it, and refuses a broken one
+//! with [`Error::InvalidModel`]: `uses_time: false` under an `L` or `F` that changes with
+//! `t`, `has_force: false` under a force that is not zero, `force_uses_velocity: false`
+//! under a force that changes with `v`, and `constant_mass: true` under a mass that changes
+//! or an `L` that mixes `q` and `v` (along one direction: a check, not a proof). Broken, the
+//! last two left the positions unchanged but the sensitivities wrong by orders of magnitude
+//! (measured on a one-coordinate model with the mass `1 + q²`).
 //!
 //! Beside `STRUCTURE`, [`ForcedLagrangian::CONSTRAINED`] is `false` for every model without
 //! `constraints(...)`: the integrator then compiles none of a constrained step's code for it

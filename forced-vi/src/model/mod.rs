@@ -21,11 +21,12 @@ pub use sparse_node::{Block, ConstraintSink, NodeBlocks, NodePattern, NodeSink, 
 ///
 /// The flags are promises: `false` means the quantity is identically zero (or constant), and
 /// the runtime may skip work for it. The default, [`Structure::GENERAL`], promises nothing.
+/// The integrator checks each promise at the initial state and beside it, and refuses a
+/// broken one with [`crate::Error::InvalidModel`] (see the guide's `STRUCTURE`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Structure {
-    /// The model has a non-conservative force. (`false` under a force that is not zero at
-    /// the initial state, or beside it, is refused by [`crate::Integrator`]'s first step.)
+    /// The model has a non-conservative force.
     pub has_force: bool,
     /// The force depends on the velocities (so `∂F/∂v` is not zero).
     pub force_uses_velocity: bool,

@@ -80,10 +80,75 @@ pub(super) fn check_force_flag<M: ForcedLagrangian<N>, const N: usize>(
         if M::STRUCTURE.uses_time {
             forces.extend([0.7390851332151607, -2.5].map(|t| model.force_at::<f64>(t, qs, vs)));
         }
-        if forces.iter().flatten().any(|f| *f != 0.0) {
+        // Finite values only: a model defined on a domain may not be beside its state.
+        if forces.iter().flatten().any(|f| f.is_finite() && *f != 0.0) {
             return Err(Error::InvalidModel {
                 message: "force is not zero, but STRUCTURE.has_force is false".into(),
             });
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a model whose other flags promise what its code does not hold, where the promise
+/// changes more than the Newton iteration's Jacobian: `force_uses_velocity: false` (the
+/// sensitivities leave `∂F/∂v` out) under a force that changes with `v`, and
+/// `constant_mass: true` (the velocities are taken in one linear step, the sensitivities
+/// leave `C` out) under a mass `∂²L/∂v²` that changes or a `C = ∂²L/∂v∂q` that is not
+/// zero. Checked like the time flag, at the initial state and beside it, along one
+/// direction (hyper-dual numbers: `uᵀEu` and `uᵀCu` with `u` all ones), so a claim that
+/// fails only elsewhere or only across that direction is not caught.
+pub(super) fn check_structure_flags<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &[f64],
+    v: &[f64],
+) -> Result<(), Error> {
+    use num_dual::HyperDual64;
+    let s = M::STRUCTURE;
+    let (Ok(qa), Ok(va)) = (<&[f64; N]>::try_from(q), <&[f64; N]>::try_from(v)) else {
+        return Ok(());
+    };
+    let beside: [f64; N] = std::array::from_fn(|i| 0.75 * qa[i] + 0.5);
+    let moving: [f64; N] = std::array::from_fn(|i| va[i] + 1.0);
+    let invalid = |message: &str| Error::InvalidModel {
+        message: message.into(),
+    };
+    if s.has_force && !s.force_uses_velocity {
+        for qs in [qa, &beside] {
+            let (f0, f1) = (
+                model.force_at::<f64>(0.0, qs, va),
+                model.force_at::<f64>(0.0, qs, &moving),
+            );
+            // Finite values only: a model defined on a domain may not be beside its state.
+            let differ = |(a, b): (&f64, &f64)| a.is_finite() && b.is_finite() && a != b;
+            if f0.iter().zip(&f1).any(differ) {
+                return Err(invalid(
+                    "force changes with the velocities, but STRUCTURE.force_uses_velocity is false",
+                ));
+            }
+        }
+    }
+    if s.constant_mass {
+        // (uᵀEu, uᵀCu) at (q, v): L along (q + ε₁u·[mixed], v + ε₂u + ε₁u·[mass]).
+        let second = |qs: &[f64; N], vs: &[f64; N], mixed: bool| -> f64 {
+            let dq = if mixed { 1.0 } else { 0.0 };
+            let qd: [HyperDual64; N] =
+                std::array::from_fn(|i| HyperDual64::new(qs[i], dq, 0.0, 0.0));
+            let vd: [HyperDual64; N] =
+                std::array::from_fn(|i| HyperDual64::new(vs[i], 1.0 - dq, 1.0, 0.0));
+            model
+                .lagrangian_at(HyperDual64::from(0.0), &qd, &vd)
+                .eps1eps2
+        };
+        let (e0, e1) = (second(qa, va, false), second(&beside, &moving, false));
+        let (c0, c1) = (second(qa, va, true), second(&beside, &moving, true));
+        let scale = e0.abs().max(e1.abs());
+        // Finite values only, as above.
+        let off = |x: f64| scale.is_finite() && x.is_finite() && x.abs() > 1e-12 * scale;
+        if off(e1 - e0) || off(c0) || off(c1) {
+            return Err(invalid(
+                "the mass matrix changes (or L mixes q and v), but STRUCTURE.constant_mass is true",
+            ));
         }
     }
     Ok(())

@@ -2,7 +2,8 @@
 //! the other (DESIGN §3), and the stepper's first state.
 
 use super::checks::{
-    check_finite, check_force_flag, check_run, check_time_flag, non_finite, step_count,
+    check_finite, check_force_flag, check_run, check_structure_flags, check_time_flag, non_finite,
+    step_count,
 };
 use super::state::State;
 use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
@@ -87,6 +88,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         }
         check_time_flag(model, &state.q.sum, &state.v)?;
         check_force_flag(model, &state.q.sum, &state.v)?;
+        check_structure_flags(model, &state.q.sum, &state.v)?;
         let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
         let energy0 = energy(model, 0.0, q0, v0, p0)
             .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
