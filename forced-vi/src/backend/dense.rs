@@ -319,10 +319,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         self.newton.last_iterations()
     }
 
-    fn carry_factors(&mut self, h: f64) -> bool {
+    fn carry_factors(&mut self, h: f64, negligible: f64) -> bool {
         // A constrained model's step Jacobian has constraint rows that do not scale with
         // `1 / h`: its factors are not carried.
-        self.carry = self.prob.cons == 0 && self.newton.iteration.carry_factors(h);
+        self.carry = self.prob.cons == 0 && self.newton.iteration.carry_factors(h, negligible);
         self.carry
     }
 

@@ -131,8 +131,9 @@ pub(crate) trait StepBackend {
     fn last_iterations(&self) -> usize;
     /// The error estimate's backend: lets the next [`Self::solve`], of a step of size `h`,
     /// start from the factors of the last one (see `crate::newton`'s iteration); returns
-    /// whether it will. Without it, every solve of the estimate makes fresh factors.
-    fn carry_factors(&mut self, h: f64) -> bool;
+    /// whether it will. Without it, every solve of the estimate makes fresh factors. The
+    /// carried factors' second correction is left out where it is at most `negligible`.
+    fn carry_factors(&mut self, h: f64, negligible: f64) -> bool;
     /// After a solve with carried factors: a bound (max-norm) on the error they left in
     /// [`Self::z`]; zero after any other solve.
     fn carried_error(&self) -> f64;
@@ -342,8 +343,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
         forward!(self, b => b.last_iterations())
     }
     #[inline(always)]
-    fn carry_factors(&mut self, h: f64) -> bool {
-        forward!(self, b => b.carry_factors(h))
+    fn carry_factors(&mut self, h: f64, negligible: f64) -> bool {
+        forward!(self, b => b.carry_factors(h, negligible))
     }
     #[inline(always)]
     fn carried_error(&self) -> f64 {

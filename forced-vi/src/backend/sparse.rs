@@ -209,10 +209,10 @@ impl StepBackend for SparseBackend<'_> {
         self.newton.last_iterations()
     }
 
-    fn carry_factors(&mut self, h: f64) -> bool {
+    fn carry_factors(&mut self, h: f64, negligible: f64) -> bool {
         // A constrained model's step Jacobian has constraint rows that do not scale with
         // `1 / h`: its factors are not carried.
-        self.carry = self.saddle.is_none() && self.newton.iteration.carry_factors(h);
+        self.carry = self.saddle.is_none() && self.newton.iteration.carry_factors(h, negligible);
         self.carry
     }
 

@@ -246,7 +246,7 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     };
     let mut n = Newton::new(3, opts);
     // No factors yet: nothing to carry.
-    assert!(!n.iteration.carry_factors(0.1));
+    assert!(!n.iteration.carry_factors(0.1, 0.0));
     one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 1);
     // A smaller step: the factors of h = 0.1 serve, scaled by 0.07 / 0.1 (unscaled, the
@@ -255,7 +255,7 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     sys.h = 0.07;
     let star = exact(&mut sys);
     sys.jacobians = 0;
-    assert!(n.iteration.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07, 0.0));
     let carried = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 0, "the carried factors were kept");
     // Its error is about what it reports (the contraction of its two corrections), and far
@@ -276,7 +276,7 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
         b,
         jacobians: 0,
     };
-    assert!(n.iteration.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07, 0.0));
     let redone = one_iteration(&mut n, &mut stiff, &z0);
     assert_eq!(stiff.jacobians, 1, "refreshed");
     let fresh = one_iteration(&mut Newton::new(3, opts), &mut stiff, &z0);
@@ -285,12 +285,51 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     // After a failure, carrying pauses for 0, then 1, 3, 7, … solves: the stiff factors
     // fail on the other system (the second failure in a row), so the next solve makes
     // fresh ones, and the one after that carries again.
-    assert!(n.iteration.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07, 0.0));
     sys.jacobians = 0;
     let _ = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 1, "refreshed");
-    assert!(!n.iteration.carry_factors(0.07));
+    assert!(!n.iteration.carry_factors(0.07, 0.0));
     let _ = one_iteration(&mut n, &mut sys, &z0);
     assert_eq!(sys.jacobians, 2, "fresh");
-    assert!(n.iteration.carry_factors(0.07));
+    assert!(n.iteration.carry_factors(0.07, 0.0));
+}
+
+#[test]
+fn a_negligible_second_correction_of_carried_factors_is_left_out() {
+    let opts = NewtonOptions::default().max_iterations(1);
+    let k = DMatrix::from_row_slice(3, 3, &[2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 2.0]);
+    let b = DVector::from_vec(vec![0.3, -0.2, 0.1]);
+    let z0 = DVector::from_vec(vec![0.0, 0.0, 0.0]);
+    let mut sys = StepLike {
+        k,
+        h: 0.1,
+        c: 0.2,
+        b,
+        jacobians: 0,
+    };
+    // Factors at h = 0.1, carried to h = 0.07 twice: with the second correction applied
+    // (nothing is negligible), and left out (any size is).
+    let mut run = |negligible: f64| {
+        let mut n = Newton::new(3, opts);
+        sys.h = 0.1;
+        assert!(!n.iteration.carry_factors(0.1, negligible));
+        one_iteration(&mut n, &mut sys, &z0);
+        sys.h = 0.07;
+        assert!(n.iteration.carry_factors(0.07, negligible));
+        let z = one_iteration(&mut n, &mut sys, &z0);
+        (z, n.iteration.carried_error())
+    };
+    let (polished, bound) = run(0.0);
+    let (first, second) = run(f64::INFINITY);
+    // Left out, the iterate is the first correction's, off from the polished one by about
+    // the second correction, which is what it reports as its error; applied, the error
+    // left is far smaller.
+    let gap = (&polished - &first).amax();
+    assert!(gap > 0.0, "the second correction was not left out");
+    assert!(
+        (gap - second).abs() <= 0.05 * second,
+        "gap {gap:e}, reported {second:e}"
+    );
+    assert!(bound < 0.1 * second, "bound {bound:e}, second {second:e}");
 }

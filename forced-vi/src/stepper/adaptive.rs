@@ -17,6 +17,10 @@ use crate::trajectory::StepRecord;
 /// [`crate::control`]).
 const ROUND_OFF_MAX: f64 = 3.0;
 
+/// The part of the tolerance below which the estimate leaves out the second correction of
+/// carried factors (see [`crate::control`]).
+const NEGLIGIBLE: f64 = 0.01;
+
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// One adaptive step from `t`: accepted when the estimated error per unit step is at
     /// most one, retried with a smaller step otherwise (see [`crate::control`]).
@@ -219,6 +223,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
+        // A second correction of carried factors that would change the estimate by at most
+        // a hundredth of the tolerance is left out (see `crate::control`).
+        let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
+        let negligible = tol.uniform_error(per_unit, NEGLIGIBLE, now);
         // Twice at most: with the factors of the last estimate, where they still serve,
         // and with fresh ones if the error they leave is not well below the tolerance.
         for fresh in [false, true] {
@@ -232,7 +240,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let to = (lay_r, r1, reference.z_mut());
             lift_step::<N>(self.backend.view(), mu, to, lifts, cons);
             // Fresh factors take the step's node blocks (see `crate::control`).
-            let carried = !fresh && reference.carry_factors(h);
+            let carried = !fresh && reference.carry_factors(h, negligible);
             if !carried && !self.block_weights.is_empty() {
                 reference.seed_node_blocks(&self.backend, self.block_weights);
             }
