@@ -558,3 +558,57 @@ fn adaptive_tolerance_near_round_off_on_the_report_scenes() {
         }
     }
 }
+
+/// An oscillator kicked by a force that switches on steeply just before the run's end
+/// (`t = 0.97` of 1), so that a run's last step is rejected after the steps before it
+/// passed easily.
+struct KickedAtTheEnd;
+
+impl ForcedLagrangian<1> for KickedAtTheEnd {
+    const CONSTRAINED: bool = false;
+    const STRUCTURE: forced_vi::model::Structure = forced_vi::model::Structure::GENERAL_DRIVEN;
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        v[0] * v[0] * 0.5 - q[0] * q[0] * 0.5
+    }
+    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        self.force_at(D::from(0.0), q, v)
+    }
+    fn force_at<D: Scalar>(&self, t: D, _q: &[D; 1], _v: &[D; 1]) -> [D; 1] {
+        [((t - 0.97) * 500.0).tanh() * 10.0 + 10.0]
+    }
+}
+
+#[test]
+fn adaptive_last_step_rejected_is_retried_shorter() {
+    // A last step that goes to the end may be longer than the controller's (no sliver
+    // after it); rejected, it must be retried at the controller's step, not stretched to
+    // the end again: that repeated the same step without end (lobatto3 at 1e-4 here). The
+    // runs go on a thread, so that a hang fails the test.
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for s in 2..=6 {
+            for tol in [1e-4, 1e-6] {
+                let run =
+                    Integrator::adaptive(&KickedAtTheEnd, Scheme::lobatto(s).unwrap(), tol, tol)
+                        .unwrap()
+                        .solve(
+                            InitialState::from_velocity([1.0], [0.0]),
+                            1.0,
+                            output::Records,
+                        );
+                let _ = tx.send((s, tol, run.map(|r| (r.last().map(|e| e.t), r.stats))));
+            }
+        }
+    });
+    for _ in 0..10 {
+        let (s, tol, run) = rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .expect("an adaptive run did not end");
+        let (end, stats) = run.unwrap_or_else(|f| panic!("lobatto{s} tol {tol:e}: {}", f.error));
+        assert_eq!(end, Some(1.0), "lobatto{s} tol {tol:e}");
+        assert!(
+            stats.rejected_steps > 0,
+            "lobatto{s} tol {tol:e}: no rejection"
+        );
+    }
+}

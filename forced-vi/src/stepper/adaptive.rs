@@ -8,7 +8,7 @@ use crate::backend::{Layout, StepBackend, StepFailure, StepView};
 
 /// The views of a step and of its reference.
 type StepViews<'a> = (StepView<'a>, StepView<'a>);
-use crate::control::{BAND, Tolerance};
+use crate::control::{BAND, Controller, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::StepRecord;
@@ -53,8 +53,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     h = h.min(self.h_dense);
                 }
             }
-            // No sliver of a step at the end.
-            let last = landing.is_none() && h >= remaining * (1.0 - 1e-10);
+            // No sliver of a step at the end: the step goes to the end where that is at
+            // most a step the controller predicts to pass (see `Controller::stretch`), and
+            // no output time comes before it.
+            let reach =
+                || (self.state.h_prev * self.controller.stretch()).min(self.options.max_step);
+            let near = remaining <= Controller::MAX_FACTOR * self.state.h_prev
+                && self.stop.is_none_or(|ts| ts >= self.t_final);
+            let last = landing.is_none()
+                && (h >= remaining * (1.0 - 1e-10) || (near && remaining <= reach()));
             if last {
                 h = remaining;
             }
