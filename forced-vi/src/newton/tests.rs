@@ -216,6 +216,19 @@ impl NonlinearSystem for StepLike {
     }
 }
 
+impl StepLike {
+    /// The system of the carried-factor tests: `K` the 3×3 second difference, a fixed `b`.
+    fn tridiagonal(h: f64, c: f64) -> Self {
+        StepLike {
+            k: DMatrix::from_row_slice(3, 3, &[2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 2.0]),
+            h,
+            c,
+            b: DVector::from_vec(vec![0.3, -0.2, 0.1]),
+            jacobians: 0,
+        }
+    }
+}
+
 /// One Newton iteration, as the error estimate runs it, from `z0`: `(iterate, Jacobians)`.
 fn one_iteration(n: &mut Newton, sys: &mut StepLike, z0: &DVector<f64>) -> DVector<f64> {
     let mut z = z0.clone();
@@ -227,16 +240,8 @@ fn one_iteration(n: &mut Newton, sys: &mut StepLike, z0: &DVector<f64>) -> DVect
 #[test]
 fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off() {
     let opts = NewtonOptions::default().max_iterations(1);
-    let k = DMatrix::from_row_slice(3, 3, &[2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 2.0]);
-    let b = DVector::from_vec(vec![0.3, -0.2, 0.1]);
     let z0 = DVector::from_vec(vec![0.0, 0.0, 0.0]);
-    let mut sys = StepLike {
-        k: k.clone(),
-        h: 0.1,
-        c: 0.2,
-        b: b.clone(),
-        jacobians: 0,
-    };
+    let mut sys = StepLike::tridiagonal(0.1, 0.2);
     // The exact solution at h = 0.07, by full Newton.
     let exact = |sys: &mut StepLike| {
         let mut n = Newton::new(3, NewtonOptions::default().simplified(false));
@@ -269,13 +274,7 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
     // A stiff nonlinearity (c = 500, so h·c = 35) makes the old factors useless: the
     // residual check catches it, the iteration is redone with fresh factors, and it equals
     // a fresh solve bit for bit.
-    let mut stiff = StepLike {
-        k,
-        h: 0.07,
-        c: 500.0,
-        b,
-        jacobians: 0,
-    };
+    let mut stiff = StepLike::tridiagonal(0.07, 500.0);
     assert!(n.iteration.carry_factors(0.07, 0.0));
     let redone = one_iteration(&mut n, &mut stiff, &z0);
     assert_eq!(stiff.jacobians, 1, "refreshed");
@@ -298,16 +297,8 @@ fn carried_factors_are_scaled_by_the_step_ratio_checked_and_refreshed_when_off()
 #[test]
 fn a_negligible_second_correction_of_carried_factors_is_left_out() {
     let opts = NewtonOptions::default().max_iterations(1);
-    let k = DMatrix::from_row_slice(3, 3, &[2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 2.0]);
-    let b = DVector::from_vec(vec![0.3, -0.2, 0.1]);
     let z0 = DVector::from_vec(vec![0.0, 0.0, 0.0]);
-    let mut sys = StepLike {
-        k,
-        h: 0.1,
-        c: 0.2,
-        b,
-        jacobians: 0,
-    };
+    let mut sys = StepLike::tridiagonal(0.1, 0.2);
     // Factors at h = 0.1, carried to h = 0.07 twice: with the second correction applied
     // (nothing is negligible), and left out (any size is).
     let mut run = |negligible: f64| {
