@@ -59,7 +59,7 @@ impl<'a> SparseBackend<'a> {
             None => None,
         };
         let (n, m) = (pattern.n(), g_pattern.as_ref().map_or(0, |g| g.n()));
-        let mut prob = SparseStep::new(node, scheme, pattern, g_pattern);
+        let mut prob = SparseStep::new(node, scheme, pattern, g_pattern, constant_mass);
         let lu = SparseLu::new(
             prob.step_pattern.dim,
             std::mem::take(&mut prob.step_pattern.col_ptr),

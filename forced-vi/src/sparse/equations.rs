@@ -58,6 +58,12 @@ pub(crate) struct SparseStep<'a> {
     lam: Vec<f64>,
     /// `h |A| |x|` at the last Jacobian ([`SparseSystem::residual_noise`]).
     noise: f64,
+    /// The model promises a constant mass matrix (`E` the same at every node and step, and
+    /// `C ≡ 0`): the `E` part of the Jacobian is assembled once, for a unit step, into
+    /// `e_part` (made on the first Jacobian), and each Jacobian scales it by `1/h` and adds
+    /// only the terms on `A` and `B` (see [`SparseSystem::jacobian`]).
+    constant_mass: bool,
+    e_part: Vec<f64>,
 }
 
 impl<'a> SparseStep<'a> {
@@ -68,6 +74,7 @@ impl<'a> SparseStep<'a> {
         scheme: &'a Scheme,
         pattern: NodePattern,
         g_pattern: Option<NodePattern>,
+        constant_mass: bool,
     ) -> Self {
         let (n, r, s) = (pattern.n(), scheme.quadrature_nodes(), scheme.stages());
         let step_pattern = StepPattern::new(&pattern, s, g_pattern.as_ref());
@@ -92,6 +99,8 @@ impl<'a> SparseStep<'a> {
             cons,
             lam,
             noise: 0.0,
+            constant_mass,
+            e_part: Vec::new(),
         }
     }
 
@@ -249,13 +258,46 @@ impl SparseSystem for SparseStep<'_> {
             [self.xs.as_slice(), self.q0.as_slice()],
         );
         let base = &self.step_pattern.base;
-        values.fill(0.0);
-        for t in self.scheme.jacobian_terms() {
-            let blk = &self.blocks[t.i];
-            let (ca, cb, cc, ce) = (t.a * h, t.b, t.c, t.e / h);
-            for k in 0..self.pattern.nnz() {
-                let x = ca * blk.a[k] + cb * blk.b[k] + cc * blk.c[k] + ce * blk.e[k];
-                values[base[k * s1 + t.m - 1] + t.j] += x;
+        let nnz = self.pattern.nnz();
+        if self.constant_mass {
+            // As on the dense path: `E` is the same at every node and every step, so its
+            // part (every term's `E` coefficient) is built once and scaled by `1/h`, and
+            // `C ≡ 0`, so the terms left are those on `A` (`s − 1` of them for Lobatto) and
+            // on `B` (`(s − 1)²`), one block each, instead of four blocks in all `s (s − 1)²`
+            // terms.
+            if self.e_part.len() != values.len() {
+                self.e_part.clear();
+                self.e_part.resize(values.len(), 0.0);
+                let e = &self.blocks[0].e;
+                for t in self.scheme.jacobian_terms() {
+                    for (k, &ek) in e.iter().enumerate().take(nnz) {
+                        self.e_part[base[k * s1 + t.m - 1] + t.j] += t.e * ek;
+                    }
+                }
+            }
+            let inv_h = 1.0 / h;
+            for (v, e) in values.iter_mut().zip(&self.e_part) {
+                *v = e * inv_h;
+            }
+            let (a_terms, b_terms) = self.scheme.force_jacobian_terms();
+            for (t, blk, coef) in a_terms
+                .iter()
+                .map(|t| (t, &self.blocks[t.i].a, t.a * h))
+                .chain(b_terms.iter().map(|t| (t, &self.blocks[t.i].b, t.b)))
+            {
+                for (k, &x) in blk.iter().enumerate().take(nnz) {
+                    values[base[k * s1 + t.m - 1] + t.j] += coef * x;
+                }
+            }
+        } else {
+            values.fill(0.0);
+            for t in self.scheme.jacobian_terms() {
+                let blk = &self.blocks[t.i];
+                let (ca, cb, cc, ce) = (t.a * h, t.b, t.c, t.e / h);
+                for k in 0..nnz {
+                    let x = ca * blk.a[k] + cb * blk.b[k] + cc * blk.c[k] + ce * blk.e[k];
+                    values[base[k * s1 + t.m - 1] + t.j] += x;
+                }
             }
         }
         if self.cons.is_some() {
@@ -278,5 +320,93 @@ impl SparseSystem for SparseStep<'_> {
 
     fn residual_noise(&self) -> f64 {
         self.noise
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Block, NodeSink};
+    use crate::sparse::pattern::record_node_pattern;
+
+    /// A damped chain with cubic springs and masses `1 + i / 4`: a constant mass matrix
+    /// (`C ≡ 0`), and `A`, `B`, `E` all nonzero.
+    struct Chain(usize);
+
+    impl SparseNode for Chain {
+        fn dof(&self) -> usize {
+            self.0
+        }
+        fn eval(&self, _t: f64, q: &[f64], v: &[f64], sink: &mut NodeSink<'_>) {
+            let n = self.0;
+            for (i, &vi) in v.iter().enumerate().take(n) {
+                let m = 1.0 + i as f64 / 4.0;
+                sink.add_lv(i, m * vi);
+                sink.add(Block::E, i, i, m);
+                sink.add_lq_f(i, -0.3 * vi);
+                sink.add(Block::B, i, i, -0.3);
+            }
+            for i in 0..n - 1 {
+                // V = d²/2 + d⁴/4 with d = q_{i+1} − q_i: L_q = −∂V/∂q.
+                let d = q[i + 1] - q[i];
+                let (f, k) = (d + d * d * d, 1.0 + 3.0 * d * d);
+                sink.add_lq_f(i, f);
+                sink.add_lq_f(i + 1, -f);
+                for (r, c, s) in [
+                    (i, i, -1.0),
+                    (i, i + 1, 1.0),
+                    (i + 1, i, 1.0),
+                    (i + 1, i + 1, -1.0),
+                ] {
+                    sink.add(Block::A, r, c, s * k);
+                }
+            }
+        }
+        fn lagrangian_value(&self, _t: f64, _q: &[f64], _v: &[f64]) -> f64 {
+            0.0
+        }
+    }
+
+    /// The constant-mass assembly (the `E` part built once and scaled, then the terms on
+    /// `A` and `B`) gives the Jacobian of the general one (four blocks in every term), for
+    /// steps of different sizes with the same `E` part.
+    #[test]
+    fn constant_mass_jacobian_matches_the_general_assembly() {
+        let chain = Chain(6);
+        let q: Vec<f64> = (0..6).map(|i| 0.1 * i as f64 - 0.2).collect();
+        let v: Vec<f64> = (0..6).map(|i| 0.3 - 0.05 * i as f64).collect();
+        for s in 2..=6 {
+            let scheme = Scheme::lobatto(s).expect("scheme");
+            let pattern = record_node_pattern(&chain, 0.0, &q, &v).expect("pattern");
+            let step = |constant_mass| {
+                let node = NodeRef::Borrowed(&chain);
+                let mut st = SparseStep::new(node, &scheme, pattern.clone(), None, constant_mass);
+                st.q0.copy_from_slice(&q);
+                st
+            };
+            let (mut fast, mut general) = (step(true), step(false));
+            let dim = fast.step_pattern.dim;
+            let z: Vec<f64> = (0..dim)
+                .map(|k| 0.01 * ((k * 7 % 5) as f64 - 2.0))
+                .collect();
+            let nnz = fast.step_pattern.row_idx.len();
+            for h in [0.3, 0.05, 0.3] {
+                fast.h = h;
+                general.h = h;
+                let (mut a, mut b) = (vec![0.0; nnz], vec![0.0; nnz]);
+                fast.jacobian(&z, &mut a).expect("jacobian");
+                general.jacobian(&z, &mut b).expect("jacobian");
+                let size = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                let diff = a
+                    .iter()
+                    .zip(&b)
+                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+                assert!(size > 1.0, "lobatto{s}: empty Jacobian");
+                assert!(
+                    diff <= 8.0 * f64::EPSILON * size,
+                    "lobatto{s}, h = {h}: {diff:e} of {size:e}"
+                );
+            }
+        }
     }
 }
