@@ -76,6 +76,7 @@ impl NodePattern {
     }
 
     /// The stored columns of `row`.
+    #[inline]
     pub fn row(&self, row: usize) -> &[usize] {
         match (self.row_start.get(row), self.row_start.get(row + 1)) {
             (Some(&a), Some(&b)) => &self.cols[a..b],
@@ -84,10 +85,17 @@ impl NodePattern {
     }
 
     /// Where `(row, col)` is stored, if it is.
+    ///
+    /// Inlined across crates: the sparse kernels of a model (its own crate) call it, through
+    /// [`NodeSink::add`], for every block entry of every node evaluation, and a call cost
+    /// more than the search of a short row.
+    #[inline]
     pub fn position(&self, row: usize, col: usize) -> Option<usize> {
-        let start = *self.row_start.get(row)?;
-        let k = self.row(row).binary_search(&col).ok()?;
-        Some(start + k)
+        let (Some(&a), Some(&b)) = (self.row_start.get(row), self.row_start.get(row + 1)) else {
+            return None;
+        };
+        let k = self.cols.get(a..b)?.binary_search(&col).ok()?;
+        Some(a + k)
     }
 
     /// Every stored `(row, col)`, row by row.

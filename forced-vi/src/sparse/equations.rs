@@ -161,19 +161,23 @@ impl<'a> SparseStep<'a> {
         let s1 = sch.stages() - 1;
         let inv_h = 1.0 / self.h;
         for i in 0..sch.quadrature_nodes() {
+            // Node `i`'s row of `Φ` and `Ψ` for the control points `1 … s − 1`, taken once
+            // (not entry by entry for every coordinate).
+            let (phi, psi) = sch.basis_rows(i);
+            let (phi, psi) = (&phi[1..=s1], &psi[1..=s1]);
             let (x, v) = (
                 &mut self.xs[i * n..(i + 1) * n],
                 &mut self.vs[i * n..(i + 1) * n],
             );
-            for a in 0..n {
-                let za = &z[a * s1..(a + 1) * s1];
-                let (mut xa, mut va) = (self.q0[a], 0.0);
-                for (m, &zm) in za.iter().enumerate() {
-                    xa += sch.phi_at(i, m + 1) * zm;
-                    va += sch.psi_at(i, m + 1) * zm;
+            let coords = x.iter_mut().zip(v.iter_mut()).zip(z.chunks_exact(s1));
+            for (((xa, va), za), &q0a) in coords.zip(&self.q0) {
+                let (mut xs, mut vs) = (q0a, 0.0);
+                for ((&zm, &ph), &ps) in za.iter().zip(phi).zip(psi) {
+                    xs += ph * zm;
+                    vs += ps * zm;
                 }
-                x[a] = xa;
-                v[a] = va * inv_h;
+                *xa = xs;
+                *va = vs * inv_h;
             }
         }
     }
@@ -216,15 +220,18 @@ impl SparseSystem for SparseStep<'_> {
         self.eval_nodes(false)?;
         let (sch, n, h) = (self.scheme, self.n, self.h);
         let s1 = sch.stages() - 1;
-        for a in 0..n {
-            for j in 0..s1 {
+        let nodes = sch.quadrature_nodes();
+        let (fq, lv) = (&self.fq[..nodes * n], &self.lv[..nodes * n]);
+        // As on the dense path: row `j` weighs node `i`'s `L_q + F` by `h b_i Φ_ij` and its
+        // `L_v` by `b_i Ψ_ij` (the scheme's residual weights, taken once per row).
+        for (a, ra) in r.chunks_exact_mut(s1).take(n).enumerate() {
+            for (j, rj) in ra.iter_mut().enumerate() {
+                let (wf, wl) = sch.residual_weights(j);
                 let mut g = if j == 0 { self.p0[a] } else { 0.0 };
-                for i in 0..sch.quadrature_nodes() {
-                    let bi = sch.b()[i];
-                    g += bi * h * sch.phi_at(i, j) * self.fq[i * n + a]
-                        + bi * sch.psi_at(i, j) * self.lv[i * n + a];
+                for (i, (&f, &l)) in wf.iter().zip(wl).enumerate() {
+                    g += f * h * fq[i * n + a] + l * lv[i * n + a];
                 }
-                r[a * s1 + j] = g;
+                *rj = g;
             }
         }
         if self.cons.is_some() {
