@@ -57,24 +57,50 @@ impl Supernodal {
     /// The analysis of the pattern; `None` if faer's symbolic Cholesky fails or its structure
     /// is not the one expected (then faer's LU does every factorisation).
     pub(crate) fn new(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> Option<Supernodal> {
-        // The upper triangle of the pattern of A + Aᵀ, with the diagonal.
-        let mut pairs: Vec<(usize, usize)> = (0..n).map(|i| (i, i)).collect();
-        for c in 0..n {
-            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
-                pairs.push((r.max(c), r.min(c)));
-            }
-        }
-        pairs.sort_unstable();
-        pairs.dedup();
+        // The upper triangle of the pattern of A + Aᵀ, with the diagonal: entry `(r, c)`
+        // goes to column `max(r, c)` at row `min(r, c)`. Bucketed by column (a counting
+        // sort), then each column's few rows sorted and deduplicated in place: one sort of
+        // all the pairs cost more than the rest of the analysis on the 1024-coordinate chain.
         let mut up_ptr = vec![0usize; n + 1];
-        for &(c, _) in &pairs {
+        for c in 0..n {
             up_ptr[c + 1] += 1;
+            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                up_ptr[r.max(c) + 1] += 1;
+            }
         }
         for c in 0..n {
             up_ptr[c + 1] += up_ptr[c];
         }
-        let up_idx: Vec<usize> = pairs.iter().map(|&(_, r)| r).collect();
-        drop(pairs);
+        let mut up_idx = vec![0usize; up_ptr[n]];
+        let mut next = up_ptr.clone();
+        for c in 0..n {
+            up_idx[next[c]] = c;
+            next[c] += 1;
+            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                let col = r.max(c);
+                up_idx[next[col]] = r.min(c);
+                next[col] += 1;
+            }
+        }
+        drop(next);
+        // Sort and deduplicate column by column, compacting towards the front.
+        let mut kept = 0;
+        for c in 0..n {
+            let (a, b) = (up_ptr[c], up_ptr[c + 1]);
+            up_idx[a..b].sort_unstable();
+            up_ptr[c] = kept;
+            let mut last = None;
+            for k in a..b {
+                let r = up_idx[k];
+                if last != Some(r) {
+                    up_idx[kept] = r;
+                    kept += 1;
+                    last = Some(r);
+                }
+            }
+        }
+        up_ptr[n] = kept;
+        up_idx.truncate(kept);
 
         let (perm, begin, rows_ptr, rows) = if n == 0 {
             (Vec::new(), vec![0], vec![0], Vec::new())
