@@ -333,6 +333,11 @@ impl Supernodal {
             *yi = x[p];
         }
         let n_super = self.begin.len() - 1;
+        // Supernodes of a few columns (the chain's have 3 to 8 columns and rows in all):
+        // the loops run over zipped slices, and the rows below a supernode are visited
+        // once each, so that bounds checks and index arithmetic stay per row, not per entry.
+        // The operations, and their order on each entry, are the plain column-oriented
+        // substitution's.
         // L: P_s on the supernode's part, L₁₁⁻¹, then the rows below take L₂₁'s share.
         for s in 0..n_super {
             let (c0, c1) = (self.begin[s], self.begin[s + 1]);
@@ -342,20 +347,24 @@ impl Supernodal {
             let storage = &self.val[self.val_ptr[s]..self.val_ptr[s + 1]];
             let (panel, l21) = storage.split_at(ns * (ns + nr));
             let tmp = &mut self.tmp[..ns];
+            let ys = &mut y[c0..c1];
             for (t, &p) in tmp.iter_mut().zip(&self.piv[c0..c1]) {
-                *t = y[c0 + p];
+                *t = ys[p];
             }
             for k in 0..ns {
                 let yk = tmp[k];
-                for i in k + 1..ns {
-                    tmp[i] -= panel[i + k * ns] * yk;
+                let col = &panel[k * ns + k + 1..(k + 1) * ns];
+                for (t, &l) in tmp[k + 1..].iter_mut().zip(col) {
+                    *t -= l * yk;
                 }
             }
-            y[c0..c1].copy_from_slice(tmp);
-            for (k, &yk) in tmp.iter().enumerate() {
-                for (&r, &l) in rows_s.iter().zip(&l21[k * nr..(k + 1) * nr]) {
-                    y[r] -= l * yk;
+            ys.copy_from_slice(tmp);
+            for (j, &r) in rows_s.iter().enumerate() {
+                let mut acc = y[r];
+                for (&yk, &l) in tmp.iter().zip(l21[j..].iter().step_by(nr)) {
+                    acc -= l * yk;
                 }
+                y[r] = acc;
             }
         }
         // U: the rows below give U₁₂'s share, then U₁₁⁻¹.
@@ -366,17 +375,18 @@ impl Supernodal {
             let panel = &self.val[self.val_ptr[s]..self.val_ptr[s] + ns * (ns + rows_s.len())];
             let (head, tail) = y.split_at_mut(c1);
             let ys = &mut head[c0..];
-            for (j, &r) in rows_s.iter().enumerate() {
+            for (&r, u12) in rows_s.iter().zip(panel[ns * ns..].chunks_exact(ns)) {
                 let yr = tail[r - c1];
-                for (yi, &u) in ys.iter_mut().zip(&panel[(ns + j) * ns..(ns + j + 1) * ns]) {
+                for (yi, &u) in ys.iter_mut().zip(u12) {
                     *yi -= u * yr;
                 }
             }
             for k in (0..ns).rev() {
-                ys[k] /= panel[k + k * ns];
+                let col = &panel[k * ns..k * ns + k + 1];
+                ys[k] /= col[k];
                 let yk = ys[k];
-                for i in 0..k {
-                    ys[i] -= panel[i + k * ns] * yk;
+                for (yi, &u) in ys[..k].iter_mut().zip(col) {
+                    *yi -= u * yk;
                 }
             }
         }
