@@ -333,11 +333,8 @@ impl Supernodal {
             *yi = x[p];
         }
         let n_super = self.begin.len() - 1;
-        // Supernodes of a few columns (the chain's have 3 to 8 columns and rows in all):
-        // the loops run over zipped slices, and the rows below a supernode are visited
-        // once each, so that bounds checks and index arithmetic stay per row, not per entry.
-        // The operations, and their order on each entry, are the plain column-oriented
-        // substitution's.
+        // The loops run over zipped slices (no index arithmetic per entry); the operations,
+        // and their order on each entry, are the plain column-oriented substitution's.
         // L: P_s on the supernode's part, L₁₁⁻¹, then the rows below take L₂₁'s share.
         for s in 0..n_super {
             let (c0, c1) = (self.begin[s], self.begin[s + 1]);
@@ -359,12 +356,12 @@ impl Supernodal {
                 }
             }
             ys.copy_from_slice(tmp);
-            for (j, &r) in rows_s.iter().enumerate() {
-                let mut acc = y[r];
-                for (&yk, &l) in tmp.iter().zip(l21[j..].iter().step_by(nr)) {
-                    acc -= l * yk;
+            // Column by column: `L₂₁` is stored by columns, and a large supernode (a 2-D
+            // lattice's) reads it in order.
+            for (&yk, l21k) in tmp.iter().zip(l21.chunks_exact(nr.max(1))) {
+                for (&r, &l) in rows_s.iter().zip(l21k) {
+                    y[r] -= l * yk;
                 }
-                y[r] = acc;
             }
         }
         // U: the rows below give U₁₂'s share, then U₁₁⁻¹.
