@@ -60,10 +60,12 @@ pub(crate) struct SparseStep<'a> {
     noise: f64,
     /// The model promises a constant mass matrix (`E` the same at every node and step, and
     /// `C ≡ 0`): the `E` part of the Jacobian is assembled once, for a unit step, into
-    /// `e_part` (made on the first Jacobian), and each Jacobian scales it by `1/h` and adds
-    /// only the terms on `A` and `B` (see [`SparseSystem::jacobian`]).
+    /// `e_part` (on the first Jacobian, `e_built`; the buffer is made with the others, so
+    /// that no step allocates), and each Jacobian scales it by `1/h` and adds only the terms
+    /// on `A` and `B` (see [`SparseSystem::jacobian`]).
     constant_mass: bool,
     e_part: Vec<f64>,
+    e_built: bool,
 }
 
 impl<'a> SparseStep<'a> {
@@ -78,6 +80,8 @@ impl<'a> SparseStep<'a> {
     ) -> Self {
         let (n, r, s) = (pattern.n(), scheme.quadrature_nodes(), scheme.stages());
         let step_pattern = StepPattern::new(&pattern, s, g_pattern.as_ref());
+        // The entries of the step Jacobian.
+        let values_len = step_pattern.row_idx.len();
         let cons = g_pattern.map(|g| StepConstraints::new(g, s, pattern.nnz()));
         let lam = vec![0.0; cons.as_ref().map_or(0, |c| c.m)];
         SparseStep {
@@ -99,8 +103,9 @@ impl<'a> SparseStep<'a> {
             cons,
             lam,
             noise: 0.0,
+            e_part: vec![0.0; if constant_mass { values_len } else { 0 }],
             constant_mass,
-            e_part: Vec::new(),
+            e_built: false,
         }
     }
 
@@ -272,9 +277,12 @@ impl SparseSystem for SparseStep<'_> {
             // `C ≡ 0`, so the terms left are those on `A` (`s − 1` of them for Lobatto) and
             // on `B` (`(s − 1)²`), one block each, instead of four blocks in all `s (s − 1)²`
             // terms.
-            if self.e_part.len() != values.len() {
-                self.e_part.clear();
+            if !self.e_built || self.e_part.len() != values.len() {
+                // `values` holds the pattern's entries, as `e_part` already does: the
+                // resize changes nothing (and does not allocate).
                 self.e_part.resize(values.len(), 0.0);
+                self.e_part.fill(0.0);
+                self.e_built = true;
                 let e = &self.blocks[0].e;
                 for t in self.scheme.jacobian_terms() {
                     for (k, &ek) in e.iter().enumerate().take(nnz) {
