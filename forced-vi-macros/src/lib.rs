@@ -95,15 +95,24 @@ fn entry(
         }
     };
     let checked = check::check(&cx, &model);
+    // The model as local terms, if it splits (DESIGN §9).
+    let split = checked.as_ref().and_then(split::split);
+    if let Some(c) = &checked {
+        check::check_dense_size(&cx, c, split.is_some());
+    }
     match (cx.check(), checked) {
         (Ok(()), Some(checked)) => {
             // The same model with its parameters as duals, for their derivatives; a model
-            // that does not read that way declares no parameters.
+            // that does not read that way declares no parameters. Such a model is not
+            // split, so a large one declares none.
             let quiet = ctxt::Ctxt::default();
             let theta = check::check_as(&quiet, &model, true);
+            if let Some(t) = &theta {
+                check::check_dense_size(&quiet, t, false);
+            }
             let read = quiet.check().is_ok();
             let theta = theta.filter(|_| read);
-            expand::generate(&checked, theta.as_ref())
+            expand::generate(&checked, split.as_ref(), theta.as_ref())
         }
         (Err(e), _) => fallback::expand(&model, e),
         (Ok(()), None) => fallback::expand(

@@ -18,9 +18,9 @@ mod force;
 mod rules;
 
 use force::{check_force, checked_force};
+pub use rules::check_dense_size;
 use rules::{
-    check_coordinates, check_dense_size, check_fields, check_generics,
-    check_lagrangian_uses_velocity, total_len,
+    check_coordinates, check_fields, check_generics, check_lagrangian_uses_velocity, total_len,
 };
 
 /// A checked model, ready for code generation.
@@ -45,8 +45,6 @@ pub struct Checked<'a> {
     /// Some index of the Lagrangian or the force is checked at run time: generate
     /// `check_model`.
     pub checked_index: bool,
-    /// The model as local terms, if it splits (DESIGN §9).
-    pub split: Option<crate::split::Split>,
     /// The holonomic constraints `g_k(t, q)`, lowered (DESIGN §11).
     pub constraints: Vec<Lowered>,
 }
@@ -103,7 +101,8 @@ pub fn check<'a>(cx: &Ctxt, model: &'a Model) -> Option<Checked<'a>> {
     check_as(cx, model, false)
 }
 
-/// [`check`], with the parameters as `__D` values if `params_dual` (no split then).
+/// [`check`], with the parameters as `__D` values if `params_dual`. The split into local
+/// terms ([`crate::split`]) and the rule that needs it ([`check_dense_size`]) come after.
 pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Checked<'a>> {
     check_fields(cx, model);
     let const_params = check_generics(cx, model);
@@ -147,7 +146,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         || force
             .as_ref()
             .is_some_and(|f| f.fns.iter().any(|func| func.checked));
-    let mut checked = Checked {
+    let checked = Checked {
         model,
         env,
         n,
@@ -159,13 +158,8 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         constant_mass,
         uses_time,
         checked_index,
-        split: None,
         constraints,
     };
-    if !params_dual {
-        checked.split = crate::split::split(&checked);
-    }
-    check_dense_size(cx, &checked);
     Some(checked)
 }
 

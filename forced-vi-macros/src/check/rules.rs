@@ -15,11 +15,11 @@ use crate::lower::{
 };
 
 /// Rule: a model with more than [`MAX_DENSE_COORDINATES`] coordinates (a literal length)
-/// splits into local terms; whole-model kernels at that size would need `N × N` dual
-/// numbers.
-pub(super) fn check_dense_size(cx: &Ctxt, c: &Checked) {
+/// splits into local terms (`splits`: [`crate::split::split`] found them); whole-model
+/// kernels at that size would need `N × N` dual numbers.
+pub fn check_dense_size(cx: &Ctxt, c: &Checked, splits: bool) {
     let Some(n) = c.n.literal() else { return };
-    if n <= MAX_DENSE_COORDINATES || c.split.is_some() {
+    if n <= MAX_DENSE_COORDINATES || splits {
         return;
     }
     let Some((key, _)) = &c.model.coordinates else {

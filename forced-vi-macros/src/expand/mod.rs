@@ -23,6 +23,7 @@ use syn::Ident;
 
 use crate::check::{Checked, CheckedForce};
 use crate::lower::{dual_ident, Env, Len, Lowered, TIME};
+use crate::split::Split;
 
 mod kernels;
 mod slots;
@@ -85,14 +86,13 @@ fn param_bindings(env: &Env) -> TokenStream {
     quote!(#( #[allow(unused_variables)] let #ps: f64 = self.#ps; )*)
 }
 
-/// The generated code for a checked model; `theta`, the same model checked with its
-/// parameters as duals, adds `lagrangian_with` and `force_with` (DESIGN §12).
-pub fn generate(c: &Checked, theta: Option<&Checked>) -> TokenStream {
+/// The generated code for a checked model and its `split` into local terms, if any;
+/// `theta`, the same model checked with its parameters as duals, adds `lagrangian_with` and `force_with` (DESIGN §12).
+pub fn generate(c: &Checked, split: Option<&Split>, theta: Option<&Checked>) -> TokenStream {
     let g = Gen::new(c);
     let timed = c.uses_time;
     // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
     // also computes its dense blocks through them.
-    let split = c.split.as_ref();
     let through = split.is_some() && crate::sparse::dense_through_split(c);
     let lagrangian = g.lagrangian();
     // Helpers: non-polynomial terms and force entries.

@@ -67,9 +67,9 @@ pub struct Summary {
     /// The CSV rows.
     pub rows: Vec<Row>,
     /// The fitted exponents of time per step against n for n ≥ 32.
-    pub exponents: Vec<super::scaling::Exponent>,
+    pub exponents: Vec<Exponent>,
     /// Peak RSS of the largest sparse runs.
-    pub peaks: Vec<super::scaling::PeakRss>,
+    pub peaks: Vec<PeakRss>,
     /// The compile-time measurement, or why there is none.
     pub compile: Result<CompileTimes, String>,
     /// The streamed-memory measurement.
@@ -127,4 +127,32 @@ impl From<&Row> for StepCostRecord {
             allocs_per_step: r.allocs,
         }
     }
+}
+
+/// Peak RSS of the sparse path at the largest size measured, per scene and scheme.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeakRss {
+    /// The scene.
+    pub scene: String,
+    /// The scheme.
+    pub method: String,
+    /// Degrees of freedom.
+    pub n: usize,
+    /// VmHWM in KiB after resetting it before the run.
+    pub kib: u64,
+}
+
+/// A fitted exponent of time per step against n.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Exponent {
+    /// The scene.
+    pub scene: String,
+    /// The scheme.
+    pub method: String,
+    /// `dense` or `sparse`.
+    pub path: &'static str,
+    /// The slope of log(time per step) against log(n).
+    pub exponent: f64,
+    /// The sizes fitted.
+    pub sizes: Vec<usize>,
 }

@@ -11,7 +11,7 @@
 use forced_vi::prelude::*;
 use forced_vi::{LinearPath, RunStats};
 
-use super::rows::{AllocCounter, Row};
+use super::rows::{AllocCounter, Exponent, PeakRss, Row};
 use crate::large::{FpuChain, Lattice2d};
 use crate::models::{Membrane, SpringChain};
 use crate::report::timing::{interleaved, median};
@@ -346,19 +346,6 @@ fn series(
     (rows, rss)
 }
 
-/// Peak RSS of the sparse path at the largest size measured, per scene and scheme.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PeakRss {
-    /// The scene.
-    pub scene: String,
-    /// The scheme.
-    pub method: String,
-    /// Degrees of freedom.
-    pub n: usize,
-    /// VmHWM in KiB after resetting it before the run.
-    pub kib: u64,
-}
-
 /// Every scaling row: both scenes, both schemes, dense and sparse.
 pub fn rows(quick: bool, counter: Option<AllocCounter>) -> (Vec<Row>, Vec<PeakRss>) {
     let lattice_ns: Vec<usize> = LATTICE_WIDTHS.iter().map(|w| w * w).collect();
@@ -411,19 +398,4 @@ pub fn exponents(rows: &[Row]) -> Vec<Exponent> {
         }
     }
     out
-}
-
-/// A fitted exponent of time per step against n.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Exponent {
-    /// The scene.
-    pub scene: String,
-    /// The scheme.
-    pub method: String,
-    /// `dense` or `sparse`.
-    pub path: &'static str,
-    /// The slope of log(time per step) against log(n).
-    pub exponent: f64,
-    /// The sizes fitted.
-    pub sizes: Vec<usize>,
 }

@@ -3,8 +3,8 @@
 
 use std::fmt::Write as _;
 
+use super::rows::Exponent;
 use super::rows::{Row, Summary};
-use super::scaling::Exponent;
 use crate::report::table::{col, markdown, met};
 
 fn us(x: Option<f64>) -> String {
