@@ -182,8 +182,9 @@ pub enum Error {
     },
     /// An adaptive run whose tolerance lies so close to `f64` round-off that the rounding
     /// errors of its steps, added up as a random walk (`sqrt(Σ_k (2ε|y_k|)²)` in the
-    /// tolerance's weighted norm), would pass three times the tolerance: the run stops
-    /// before that step, so that no `Ok` claims an accuracy the arithmetic cannot give (see
+    /// tolerance's weighted norm), or the differences its error estimates left out as
+    /// round-off, added up, would pass three times the tolerance: the run stops before that
+    /// step, so that no `Ok` claims an accuracy the arithmetic cannot give (see
     /// [`crate::control`]). Fewer steps (more stages) or a looser tolerance get further.
     #[error(
         "the round-off of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: the tolerance is too close to f64 round-off for this run; loosen it or use more stages"
@@ -193,7 +194,8 @@ pub enum Error {
         t: f64,
         /// The steps accepted until then.
         steps: usize,
-        /// The accumulated round-off with the next step, in units of the tolerance.
+        /// The accumulated round-off with the next step, in units of the tolerance: the
+        /// larger of the two sums.
         ratio: f64,
     },
     /// An adaptive run reached its step cap ([`crate::StepOptions::max_steps`]).

@@ -83,21 +83,24 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
                 Ok((res, err))
             });
-            // The run's round-off with this step (see `crate::control`): past the
-            // tolerance, the step is not taken.
-            let round_off = match &solved {
+            // The run's round-off with this step, and the differences its estimates left
+            // out as round-off (see `crate::control`): past the tolerance, the step is not
+            // taken.
+            let (round_off, unresolved) = match &solved {
                 Ok((_, err)) if *err <= 1.0 => {
                     let st = &self.state;
-                    self.round_off_sq + tol.round_off_sq((&st.q.sum, &st.p.sum))
+                    let r = self.round_off_sq + tol.round_off_sq((&st.q.sum, &st.p.sum));
+                    (r, self.unresolved + self.unresolved_step)
                 }
-                _ => 0.0,
+                _ => (0.0, 0.0),
             };
-            if round_off > ROUND_OFF_MAX * ROUND_OFF_MAX {
+            let ratio = round_off.sqrt().max(unresolved);
+            if ratio > ROUND_OFF_MAX {
                 self.state.copy_from(&self.saved);
                 return Err(Error::ToleranceBelowRoundOff {
                     t: t0,
                     steps: self.stats.steps,
-                    ratio: round_off.sqrt(),
+                    ratio,
                 });
             }
             // An output time inside an accepted step: where the step's dense output misses
@@ -127,6 +130,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 Ok((res, err)) => {
                     if err <= 1.0 {
                         self.round_off_sq = round_off;
+                        self.unresolved = unresolved;
                         self.estimate = err / per_unit;
                         self.h_next = self.controller.accept(h, err);
                         if h < planned && !last {
@@ -223,6 +227,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         tol: &Tolerance<N>,
         iters: &mut usize,
     ) -> Result<f64, StepFailure> {
+        self.unresolved_step = 0.0;
         let Some(reference) = self.reference.as_mut() else {
             return Ok(0.0);
         };
@@ -266,7 +271,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             views,
             (backend as &dyn StepBackend, reference as &dyn StepBackend),
         );
-        Ok(local_error(steps, lhs, (tol, now), &mut self.err))
+        let (err, unresolved) = local_error(steps, lhs, (tol, now), &mut self.err);
+        self.unresolved_step = unresolved;
+        Ok(err)
     }
 
     /// The first step of an adaptive run, from the initial data (Hairer, Nørsett & Wanner,
@@ -433,27 +440,38 @@ fn solve_reference<const N: usize>(
 
 /// The weighted norm, per unit step, of the difference between the step in `backend` and
 /// the reference's in `reference`, at their ends in `(q, p)`; `dp` is the step's momentum
-/// update and `err` is scratch for the difference.
+/// update and `err` is scratch for the difference. Also returns what the comparison left
+/// out as round-off, in the tolerance's norm (not per unit step; see [`crate::control`]).
 #[inline(always)]
 fn local_error<const N: usize>(
     ((view, view_r), (backend, reference)): (StepViews<'_>, (&dyn StepBackend, &dyn StepBackend)),
     (dp, h, per_unit): (&[f64], f64, f64),
     (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
     err: &mut (Vec<f64>, Vec<f64>),
-) -> f64 {
+) -> (f64, f64) {
     let (s1, lay, z) = (view.scheme.stages() - 1, view.layout, view.z);
     let (r1, lay_r, zr) = (view_r.scheme.stages() - 1, view_r.layout, view_r.z);
-    let (eq, ep) = (&mut err.0[..N], &mut err.1[..N]);
+    // The differences in the first `N` entries of each buffer, what is cut from them in the
+    // next `N`.
+    let ((eq, cq), (ep, cp)) = (err.0.split_at_mut(N), err.1.split_at_mut(N));
     // Each difference less the round-off of the sums it compares (4ε of their terms'
     // sizes): noise that smaller steps do not reduce must not count as error per unit
     // step, or the step size would shrink without end.
     let noise = 4.0 * f64::EPSILON;
+    // A constrained step's end multiplier balances the momentum `p₀ + …` and its end
+    // position meets `g(q₀ + z) = 0`: both are resolved to the round-off of `p₀` and `q₀`,
+    // which are among the terms compared.
+    let impulse = reference.constraint_impulse();
+    let (_, _, q0, p0) = backend.step_data();
+    let start = |x: &[f64], a: usize| if impulse.is_some() { x[a].abs() } else { 0.0 };
     // The momenta: `dp` less the reference's `h Σ_i b_i (L_q + F)_i`, less its constraint
     // impulse, and the sizes of the terms (in `eq` until the positions are compared), node
     // by node.
     let (b, rs) = (view.scheme.b(), view_r.scheme);
     ep.copy_from_slice(&dp[..N]);
-    eq.fill(0.0);
+    for (a, size) in eq.iter_mut().enumerate() {
+        *size = start(p0, a);
+    }
     for (i, &bi) in b.iter().enumerate() {
         for (size, f) in eq.iter_mut().zip(backend.node_fq(i)) {
             *size += (h * bi * f).abs();
@@ -467,18 +485,22 @@ fn local_error<const N: usize>(
             *size += t.abs();
         }
     }
-    if let Some(imp) = reference.constraint_impulse() {
+    if let Some(imp) = impulse {
         for ((d, size), i) in ep.iter_mut().zip(eq.iter_mut()).zip(imp) {
             *d += i;
             *size += i.abs();
         }
     }
-    for (d, size) in ep.iter_mut().zip(eq.iter()) {
-        *d = (d.abs() - noise * size).max(0.0);
+    for ((d, c), size) in ep.iter_mut().zip(cp.iter_mut()).zip(eq.iter()) {
+        *c = d.abs().min(noise * size);
+        *d = d.abs() - *c;
     }
-    for (a, e) in eq.iter_mut().enumerate() {
+    for (a, (e, c)) in eq.iter_mut().zip(cq.iter_mut()).enumerate() {
         let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
-        *e = ((x - y).abs() - noise * (x.abs() + y.abs())).max(0.0);
+        let d = (x - y).abs();
+        *c = d.min(noise * (x.abs() + y.abs() + start(q0, a)));
+        *e = d - *c;
     }
-    tol.error_norm(per_unit, (eq, ep), now)
+    let (cq, cp) = (&cq[..N], &cp[..N]);
+    tol.error_and_cut_norms(per_unit, (eq, ep), (cq, cp), now)
 }

@@ -175,6 +175,11 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Adaptive runs: the accumulated round-off, squared, in the tolerance's norm (see
     /// [`crate::control`]).
     round_off_sq: f64,
+    /// Adaptive runs: the differences left out of the accepted steps' estimates as their
+    /// round-off, added up, in the tolerance's norm; and the last estimate's (see
+    /// [`crate::control`]).
+    unresolved: f64,
+    unresolved_step: f64,
     options: StepOptions,
     h: f64,
     t_final: f64,
