@@ -516,7 +516,13 @@ fn constraint_adaptive_tight_tolerances_end_ok_or_below_round_off() {
     );
     let end = fine.records.last().expect("records");
     for s in [3, 5, 7] {
-        for tol in [1e-11, 1e-12] {
+        // lobatto3 at 1e-13 still collapses into `StepSizeTooSmall`, on either backend.
+        let tols: &[f64] = if s == 3 {
+            &[1e-11, 1e-12]
+        } else {
+            &[1e-11, 1e-12, 1e-13]
+        };
+        for &tol in tols {
             let res = Integrator::adaptive(&chain, Scheme::lobatto(s).expect("s"), tol, tol)
                 .expect("integrator")
                 .linear_path(LinearPath::Sparse)
@@ -532,7 +538,7 @@ fn constraint_adaptive_tight_tolerances_end_ok_or_below_round_off() {
         }
     }
     // Most of them end `Ok`: the bound above is not met by stopping.
-    assert!(oks >= 17, "{oks} of 21 runs ended Ok");
+    assert!(oks >= 18, "{oks} of 23 runs ended Ok");
 }
 
 #[test]

@@ -7,7 +7,10 @@
 pub struct NewtonOptions {
     /// Cap on iterations per solve (default 12).
     pub max_iterations: usize,
-    /// Relative tolerance on the estimated error of `z` (default 1e-12).
+    /// Relative tolerance on the estimated error of `z` (default 1e-12). The sparse
+    /// backend solves a constrained model's steps to a thousandth of it: its iterates stop
+    /// just inside the test, and an error in the multipliers moves the momentum by that
+    /// error over the step size.
     pub rtol: f64,
     /// Absolute tolerance on the estimated error of `z` (default 1e-15).
     pub atol: f64,
