@@ -470,7 +470,8 @@ fn constraint_adaptive_steps_follow_the_tolerance() {
 /// collapsed to `StepSizeTooSmall`: here the pendulum with lobatto3 at 1e-13 and the 8-link
 /// chain (sparse backend) with lobatto3 at 1e-12; on a 5-second run of the pendulum also
 /// lobatto3 at 1e-12 and lobatto4 at 1e-13, and on a 4-link chain lobatto5 from 1e-11 on.
-/// Now each run ends `Ok` within 10·tol (the pendulum against its angle form, the chain
+/// Counting only each component's own start (not the largest), the chain with lobatto3
+/// at 1e-13 still collapsed. Now each run ends `Ok` within 10·tol (the pendulum against its angle form, the chain
 /// against lobatto7 at 4000 fixed steps on the dense backend), or, where the run's
 /// round-off would pass the tolerance, in `ToleranceBelowRoundOff`.
 #[test]
@@ -516,13 +517,7 @@ fn constraint_adaptive_tight_tolerances_end_ok_or_below_round_off() {
     );
     let end = fine.records.last().expect("records");
     for s in [3, 5, 7] {
-        // lobatto3 at 1e-13 still collapses into `StepSizeTooSmall`, on either backend.
-        let tols: &[f64] = if s == 3 {
-            &[1e-11, 1e-12]
-        } else {
-            &[1e-11, 1e-12, 1e-13]
-        };
-        for &tol in tols {
+        for tol in [1e-11, 1e-12, 1e-13] {
             let res = Integrator::adaptive(&chain, Scheme::lobatto(s).expect("s"), tol, tol)
                 .expect("integrator")
                 .linear_path(LinearPath::Sparse)
@@ -538,7 +533,7 @@ fn constraint_adaptive_tight_tolerances_end_ok_or_below_round_off() {
         }
     }
     // Most of them end `Ok`: the bound above is not met by stopping.
-    assert!(oks >= 18, "{oks} of 23 runs ended Ok");
+    assert!(oks >= 19, "{oks} of 24 runs ended Ok");
 }
 
 #[test]

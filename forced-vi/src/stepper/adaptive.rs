@@ -460,18 +460,21 @@ fn local_error<const N: usize>(
     let noise = 4.0 * f64::EPSILON;
     // A constrained step's end multiplier balances the momentum `p₀ + …` and its end
     // position meets `g(q₀ + z) = 0`: both are resolved to the round-off of `p₀` and `q₀`,
-    // which are among the terms compared.
+    // which are among the terms compared; and of all their components, since the
+    // constraint gradients spread the multipliers' round-off over every coordinate.
     let impulse = reference.constraint_impulse();
     let (_, _, q0, p0) = backend.step_data();
-    let start = |x: &[f64], a: usize| if impulse.is_some() { x[a].abs() } else { 0.0 };
+    let largest = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let (q0_size, p0_size) = match impulse {
+        Some(_) => (largest(q0), largest(p0)),
+        None => (0.0, 0.0),
+    };
     // The momenta: `dp` less the reference's `h Σ_i b_i (L_q + F)_i`, less its constraint
     // impulse, and the sizes of the terms (in `eq` until the positions are compared), node
     // by node.
     let (b, rs) = (view.scheme.b(), view_r.scheme);
     ep.copy_from_slice(&dp[..N]);
-    for (a, size) in eq.iter_mut().enumerate() {
-        *size = start(p0, a);
-    }
+    eq.fill(p0_size);
     for (i, &bi) in b.iter().enumerate() {
         for (size, f) in eq.iter_mut().zip(backend.node_fq(i)) {
             *size += (h * bi * f).abs();
@@ -498,7 +501,7 @@ fn local_error<const N: usize>(
     for (a, (e, c)) in eq.iter_mut().zip(cq.iter_mut()).enumerate() {
         let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
         let d = (x - y).abs();
-        *c = d.min(noise * (x.abs() + y.abs() + start(q0, a)));
+        *c = d.min(noise * (x.abs() + y.abs() + q0_size));
         *e = d - *c;
     }
     let (cq, cp) = (&cq[..N], &cp[..N]);
