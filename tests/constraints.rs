@@ -463,6 +463,160 @@ fn constraint_adaptive_steps_follow_the_tolerance() {
     }
 }
 
+/// A bead on a hoop of radius `r` whose centre oscillates horizontally, `a sin ωt`: a
+/// constraint that reads the time, with gravity and drag.
+#[forced_vi::forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - g * y,
+    force(x = -c * x_dot, y = -c * y_dot),
+    constraints(0.5 * ((x - a * (w * t).sin()) * (x - a * (w * t).sin()) + y * y - r * r)),
+)]
+struct MovingHoop {
+    g: f64,
+    c: f64,
+    a: f64,
+    w: f64,
+    r: f64,
+}
+
+/// The same bead in its angle `θ` on the hoop, `x = a sin ωt + r sin θ`, `y = −r cos θ`:
+/// no constraint (the drag's generalised force is `F · ∂x/∂θ`).
+#[forced_vi::forced_lagrangian(
+    coordinates(th),
+    lagrangian = 0.5 * ((a * w * (w * t).cos() + r * th.cos() * th_dot)
+        * (a * w * (w * t).cos() + r * th.cos() * th_dot)
+        + (r * th.sin() * th_dot) * (r * th.sin() * th_dot)) + g * r * th.cos(),
+    force(th = -c * r * (a * w * (w * t).cos() * th.cos() + r * th_dot)),
+)]
+struct MovingHoopAngle {
+    g: f64,
+    c: f64,
+    a: f64,
+    w: f64,
+    r: f64,
+}
+
+/// A constraint that reads the time (DESIGN §11): a motion on `g(t, q) = 0` meets
+/// `G v + ∂g/∂t = 0`, not `G v = 0`. Before the velocity-level constraint counted `∂g/∂t`
+/// (checked on that code): consistent initial data were refused with
+/// `InconsistentInitialState` (velocity residual 0.58 here), and the state
+/// `InitialState::projected` offered instead (its velocity projected onto `G v = 0`, wrong
+/// for a moving hoop) ran `Ok` to an error of 0.36 with a recorded constraint residual of
+/// 4e-16. Now, against the angle form (lobatto7, 4000 fixed steps): fixed steps converge at
+/// the schemes' orders on both backends, adaptive runs end within their tolerance, the
+/// records' residual `max(|g|, |G v + ∂g/∂t|)` stays at round-off, `projected` keeps a
+/// consistent state and moves an inconsistent velocity onto `G v + ∂g/∂t = 0`, and a
+/// velocity that is off the moving hoop is still refused.
+#[test]
+fn constraint_moving_support_matches_the_angle_form() {
+    let (g, c, a, w, r) = (9.81, 0.2, 0.3, 2.5, 1.2);
+    let model = MovingHoop { g, c, a, w, r };
+    let angle = MovingHoopAngle { g, c, a, w, r };
+    let (th0, om0, t_end) = (0.7f64, 0.5, 5.0);
+    let (s0, c0) = th0.sin_cos();
+    let q0 = [r * s0, -r * c0];
+    let v0 = [a * w + r * c0 * om0, r * s0 * om0];
+    let start = InitialState::from_velocity(q0, v0);
+    let end = Integrator::new(&angle, Scheme::lobatto(7).expect("s"), t_end / 4000.0)
+        .expect("integrator")
+        .final_state(InitialState::from_velocity([th0], [om0]), t_end)
+        .expect("angle reference");
+    let (th, om) = (end.q[0], end.v[0]);
+    let (st, ct) = th.sin_cos();
+    let wt = w * t_end;
+    let exact = [
+        a * wt.sin() + r * st,
+        -r * ct,
+        a * w * wt.cos() + r * ct * om,
+        r * st * om,
+    ];
+    let err = |q: &[f64], v: &[f64]| {
+        [q[0], q[1], v[0], v[1]]
+            .iter()
+            .zip(&exact)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    for path in [LinearPath::Dense, LinearPath::Sparse] {
+        for s in 2..=4 {
+            let mut pts = Vec::new();
+            for n in [50usize, 100, 200, 400] {
+                let h = t_end / n as f64;
+                let run = Integrator::new(&model, Scheme::lobatto(s).expect("s"), h)
+                    .expect("integrator")
+                    .linear_path(path)
+                    .solve(start, t_end, output::Records)
+                    .expect("moving hoop, fixed steps");
+                let last = run.last().expect("records");
+                let residual = run
+                    .records
+                    .iter()
+                    .map(|x| x.constraint_residual)
+                    .fold(0.0, f64::max);
+                assert!(
+                    residual < 1e-13,
+                    "{path:?} lobatto{s} n {n}: {residual:.1e}"
+                );
+                pts.push((h, err(last.q.as_slice(), last.v.as_slice())));
+            }
+            let k = slope(&pts);
+            eprintln!("{path:?} lobatto{s}: errors {pts:?}, slope {k:.2}");
+            let order = (2 * s - 2) as f64;
+            assert!((k - order).abs() < 0.3, "{path:?} lobatto{s}: slope {k:.2}");
+        }
+        for (s, tol) in [(3, 1e-6), (4, 1e-8), (5, 1e-10)] {
+            let run = Integrator::adaptive(&model, Scheme::lobatto(s).expect("s"), tol, tol)
+                .expect("integrator")
+                .linear_path(path)
+                .solve(start, t_end, output::Records)
+                .expect("moving hoop, adaptive");
+            let last = run.last().expect("records");
+            let e = err(last.q.as_slice(), last.v.as_slice());
+            eprintln!(
+                "{path:?} lobatto{s} tol {tol:.0e}: err {e:.1e} ({:.2} tol)",
+                e / tol
+            );
+            assert!(
+                e <= 10.0 * tol,
+                "{path:?} lobatto{s} tol {tol:.0e}: {e:.1e}"
+            );
+        }
+    }
+    // `projected` keeps the consistent state, and puts a velocity that ignores the hoop's
+    // motion onto `G v + ∂g/∂t = 0`: `(x − a sin ωt) v_x + y v_y = 0` at t = 0 is the
+    // component along the hoop, so the moved velocity differs from `v0` along the radius.
+    let kept = InitialState::projected(&model, q0, v0).expect("projection");
+    let ok = Integrator::new(&model, Scheme::lobatto(4).expect("s"), t_end / 200.0)
+        .expect("integrator")
+        .solve(kept, t_end, output::Records)
+        .expect("projected start");
+    let first = &ok.records[0];
+    assert!((first.v[0] - v0[0]).abs() < 1e-14 && (first.v[1] - v0[1]).abs() < 1e-14);
+    let last = ok.last().expect("records");
+    assert!(err(last.q.as_slice(), last.v.as_slice()) < 1e-10);
+    let still = [r * c0 * om0, r * s0 * om0];
+    let moved = InitialState::projected(&model, q0, still).expect("projection");
+    let run = Integrator::new(&model, Scheme::lobatto(4).expect("s"), t_end / 200.0)
+        .expect("integrator")
+        .solve(moved, t_end, output::Records)
+        .expect("projected start");
+    let v = run.records[0].v;
+    let rate = -a * w * q0[0];
+    let along = q0[0] * v[0] + q0[1] * v[1];
+    assert!((along + rate).abs() < 1e-13, "{along} {rate}");
+    // The velocity of a bead at rest on the moving hoop is off it: refused.
+    let at_rest = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01)
+        .expect("integrator")
+        .final_state(InitialState::from_velocity(q0, [0.0, 0.0]), 1.0);
+    assert!(matches!(
+        at_rest.map_err(|f| f.error),
+        Err(Error::InconsistentInitialState {
+            what: "velocity",
+            ..
+        })
+    ));
+}
+
 /// Tight tolerances on constrained models (`forced_vi::control`, "The norm"): a step's end
 /// multiplier and end position are resolved to the round-off of its start `(q₀, p₀)`, which
 /// the error estimate counts among the terms it compares. Without them the estimate at

@@ -211,7 +211,7 @@ pub enum Error {
         "the initial {what} violates the constraints: residual {residual:.3e} (at most {tol:.1e}); InitialState::projected makes it consistent"
     )]
     InconsistentInitialState {
-        /// `"position"` (`g(q_0) ≠ 0`) or `"velocity"` (`G(q_0) v_0 ≠ 0`).
+        /// `"position"` (`g(0, q_0) ≠ 0`) or `"velocity"` (`G(q_0) v_0 + ∂g/∂t ≠ 0`).
         what: &'static str,
         /// The largest residual.
         residual: f64,

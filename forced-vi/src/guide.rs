@@ -316,9 +316,12 @@
 //! `constraints(g1, g2, ...)` lists expressions of the coordinates, the parameters and `t`
 //! that must vanish on the motion (DESIGN §11). The step then carries multipliers at its
 //! control points (the constrained Lobatto IIIA–IIIB pair; RATTLE for `lobatto2`), keeps
-//! `g = 0` and `G v = 0` to round-off at every step, and reports the mean constraint force
-//! `−Gᵀλ` of each step in [`StepRecord::constraint_force`](crate::StepRecord) and
-//! `max(|g|, |G v|)` in `constraint_residual`. Fixed and adaptive steps, dense output and
+//! `g = 0` and `G v + ∂g/∂t = 0` to round-off at every step, and reports the mean
+//! constraint force `−Gᵀλ` of each step in [`StepRecord::constraint_force`](crate::StepRecord)
+//! and `max(|g|, |G v + ∂g/∂t|)` in `constraint_residual`. A constraint that reads `t` (a
+//! moving support, a driven linkage) moves the velocity-level constraint by its rate
+//! `∂g/∂t`, which the runtime takes from `constraints` with a dual number in `t`; it is
+//! zero for one that does not. Fixed and adaptive steps, dense output and
 //! ensembles work; non-Lobatto schemes and sensitivities of constrained models are
 //! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints

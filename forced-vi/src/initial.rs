@@ -219,11 +219,12 @@ fn velocity_iteration<const N: usize>(
     })
 }
 
-/// The tolerance of the initial-data check of a constrained model (`g(q_0) = 0`,
-/// `G(q_0) v_0 = 0`), relative to the size of the data.
+/// The tolerance of the initial-data check of a constrained model (`g(0, q_0) = 0`,
+/// `G(q_0) v_0 + ∂g/∂t = 0`), relative to the size of the data.
 pub const CONSTRAINT_TOL: f64 = 1e-10;
 
-/// `g(q_0)` and `G(q_0) v_0` of a constrained model (DESIGN §11): `(g, G v)`.
+/// `g(0, q_0)`, the velocity-level residual `G(q_0) v_0 + ∂g/∂t` and `G` of a constrained
+/// model (DESIGN §11).
 fn constraint_residuals<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     q: &SVector<f64, N>,
@@ -233,12 +234,15 @@ fn constraint_residuals<M: ForcedLagrangian<N>, const N: usize>(
     let mut g = DVector::zeros(m);
     let mut jac = DMatrix::zeros(m, N);
     crate::model::general::constraint_jacobian_at(model, 0.0, q, g.as_mut_slice(), &mut jac);
-    let gv = &jac * DVector::from_column_slice(v.as_slice());
+    let mut rate = DVector::zeros(m);
+    crate::model::general::constraint_rate_at(model, 0.0, q.as_slice(), rate.as_mut_slice());
+    let gv = &jac * DVector::from_column_slice(v.as_slice()) + rate;
     (g, gv, jac)
 }
 
-/// `|g(t, q)|`, `|G(q) v|` and `|G(q)|` (max-norms) of a constrained model, from the
-/// general dual-number kernels (the dense backend's).
+/// `|g(t, q)|`, `|G(q) v + ∂g/∂t|` and the size of that sum's terms, `|G| |v| + |∂g/∂t|`
+/// (max-norms), of a constrained model, from the general dual-number kernels (the dense
+/// backend's).
 pub(crate) fn constraint_residuals_at<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     t: f64,
@@ -253,17 +257,20 @@ pub(crate) fn constraint_residuals_at<M: ForcedLagrangian<N>, const N: usize>(
     let mut jac = DMatrix::zeros(m, N);
     let q = SVector::<f64, N>::from_column_slice(q);
     crate::model::general::constraint_jacobian_at(model, t, &q, g.as_mut_slice(), &mut jac);
-    let gv = &jac * DVector::from_column_slice(v);
-    [g.amax(), gv.amax(), jac.amax()]
+    let mut rate = DVector::zeros(m);
+    crate::model::general::constraint_rate_at(model, t, q.as_slice(), rate.as_mut_slice());
+    let v = DVector::from_column_slice(v);
+    let gv = &jac * &v + &rate;
+    [g.amax(), gv.amax(), jac.amax() * v.amax() + rate.amax()]
 }
 
-/// Checks that initial data lie on the constraints, from `[|g(q_0)|, |G(q_0) v_0|, |G|]`:
-/// `|g(q_0)| ≤ 10⁻¹⁰ (1 + |q_0|)` and `|G(q_0) v_0| ≤ 10⁻¹⁰ max(1, |G| |v_0|)` (max-norms),
-/// else [`Error::InconsistentInitialState`].
-pub(crate) fn check_constraints(q: &[f64], v: &[f64], [g, gv, jac]: [f64; 3]) -> Result<(), Error> {
+/// Checks that initial data lie on the constraints, from `[|g|, |G v + ∂g/∂t|, |G| |v| +
+/// |∂g/∂t|]` at `(0, q_0, v_0)`: `|g| ≤ 10⁻¹⁰ (1 + |q_0|)` and `|G v + ∂g/∂t| ≤ 10⁻¹⁰
+/// max(1, |G| |v| + |∂g/∂t|)` (max-norms), else [`Error::InconsistentInitialState`].
+pub(crate) fn check_constraints(q: &[f64], [g, gv, size]: [f64; 3]) -> Result<(), Error> {
     let amax = |x: &[f64]| x.iter().fold(0.0f64, |m, y| m.max(y.abs()));
     let tol_q = CONSTRAINT_TOL * (1.0 + amax(q));
-    let tol_v = CONSTRAINT_TOL * (jac * amax(v)).max(1.0);
+    let tol_v = CONSTRAINT_TOL * size.max(1.0);
     for (what, r, tol) in [("position", g, tol_q), ("velocity", gv, tol_v)] {
         if r.is_nan() || r > tol {
             return Err(Error::InconsistentInitialState {
@@ -279,7 +286,8 @@ pub(crate) fn check_constraints(q: &[f64], v: &[f64], [g, gv, jac]: [f64; 3]) ->
 impl<const N: usize> InitialState<N> {
     /// The initial state `(q, v)` of a constrained model made consistent (DESIGN §11):
     /// `q` moved onto `g(q) = 0` by Gauss–Newton steps of least change
-    /// (`q ← q − Gᵀ(GGᵀ)⁻¹ g`), then `v` projected onto `G v = 0` the same way. A typed error
+    /// (`q ← q − Gᵀ(GGᵀ)⁻¹ g`), then `v` projected onto `G v + ∂g/∂t = 0` the same way (at
+    /// `t = 0`; `∂g/∂t = 0` for constraints that do not read the time). A typed error
     /// if the constraints are singular at `q` or the projection does not converge.
     ///
     /// A model whose sparse kernels evaluate its constraints
@@ -295,14 +303,17 @@ impl<const N: usize> InitialState<N> {
             let m = model.constraint_count();
             let (mut q, mut v) = (q, v);
             let qv = (&mut q[..], &mut v[..]);
+            let rate = |q: &[f64], out: &mut [f64]| {
+                crate::model::general::constraint_rate_at(model, 0.0, q, out)
+            };
             if m > 0 && node.sparse_constraint_count() == m {
-                crate::sparse::constraints::project_initial(node, qv, CONSTRAINT_TOL)?;
+                crate::sparse::constraints::project_initial(node, qv, CONSTRAINT_TOL, &rate)?;
                 return Ok(InitialState::from_velocity(q, v));
             }
             // A large model: its constraints' kernels from dual numbers, on sparse storage.
             if m > 0 && N >= crate::LinearPath::SPARSE_MIN_DOF {
                 let node = crate::model::DualConstraints { model, node };
-                crate::sparse::constraints::project_initial(&node, qv, CONSTRAINT_TOL)?;
+                crate::sparse::constraints::project_initial(&node, qv, CONSTRAINT_TOL, &rate)?;
                 return Ok(InitialState::from_velocity(q, v));
             }
         }

@@ -25,7 +25,8 @@ pub struct StepRecord<const N: usize> {
     pub energy: f64,
     /// Energy-balance error `E(t_k) − E(0) − W_k + ∫₀^{t_k} ∂L/∂t`, with the work `W_k` of the
     /// force and the integral of `∂L/∂t` (zero for an autonomous model) summed with the
-    /// scheme's own quadrature (DESIGN §4, §7).
+    /// scheme's own quadrature (DESIGN §4, §7). A constraint that reads the time does work
+    /// that `W` leaves out, so on such a model this is not a conservation check.
     pub energy_balance: f64,
     /// Newton iterations (linear solves) this step took, over all attempts.
     pub newton_iterations: usize,
@@ -40,8 +41,9 @@ pub struct StepRecord<const N: usize> {
     /// A constrained model (DESIGN §11): the constraint force `Gᵀλ` averaged over the
     /// step that ended here (its impulse over the step size); zero without constraints.
     pub constraint_force: SVector<f64, N>,
-    /// A constrained model: `max(|g(t, q)|, |G(q) v|)` at this record (max-norms); zero
-    /// without constraints and in a lean run.
+    /// A constrained model: `max(|g(t, q)|, |G(q) v + ∂g/∂t|)` at this record (max-norms;
+    /// `∂g/∂t = 0` for constraints that do not read the time); zero without constraints and
+    /// in a lean run.
     pub constraint_residual: f64,
 }
 

@@ -29,6 +29,8 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     /// `h Σ_j b_j G(x_j)ᵀ λ_j` (DESIGN §11), and the multipliers `λ_{s−1}` at its end.
     impulse: Vec<f64>,
     mu: Vec<f64>,
+    /// A constrained model: `∂g/∂t` at the end of the last step.
+    rate: Vec<f64>,
     /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
     carry: bool,
 }
@@ -65,6 +67,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             },
             impulse: Vec::new(),
             mu: vec![0.0; cons],
+            rate: vec![0.0; cons],
             newton: Newton::new(dim, newton),
             z: DVector::zeros(dim),
             rhs: DVector::zeros(0),
@@ -132,18 +135,28 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
 
     /// The end of a constrained step (DESIGN §11): the multiplier `μ = λ_{s−1}` and the
     /// velocity `v_{k+1}` with `L_v(q_{k+1}, v_{k+1}) + h b_{s−1} G(q_{k+1})ᵀ μ = p̃` and
-    /// `G(q_{k+1}) v_{k+1} = 0`, by Newton on the saddle-point matrix `[[E, h b Gᵀ], [G, 0]]`;
-    /// then the impulse of the constraint forces over the step. `G(x_j)` are those of the
-    /// last residual evaluation, which was at the solution.
+    /// `G(q_{k+1}) v_{k+1} + ∂g/∂t = 0`, by Newton on the saddle-point matrix
+    /// `[[E, h b Gᵀ], [G, 0]]`; then the impulse of the constraint forces over the step.
+    /// `G(x_j)` are those of the last residual evaluation, which was at the solution.
     fn project(&mut self) -> Result<(), StepFailure> {
         let prob = &self.prob;
         let model = prob.model;
         let kernel =
             |t: f64, q: &SVector<f64, N>, v: &SVector<f64, N>| model.node_jacobian_at(t, q, v);
+        let s = prob.scheme.stages();
+        let (t1, q1) = (prob.t0 + prob.h, prob.xs[s - 1].as_slice());
+        crate::model::general::constraint_rate_at(model, t1, q1, &mut self.rate);
         let step = (prob.scheme, prob.h, prob.t0, &prob.p0);
         let nodes = (&prob.grads[..], &prob.gjac[..], &prob.xs[..], &prob.vs[..]);
         let out = (&mut self.impulse, &mut self.mu[..]);
-        project::<N>(step, nodes, prob.cons, self.z.as_slice(), &kernel, out)
+        project::<N>(
+            step,
+            (nodes, &self.rate),
+            prob.cons,
+            self.z.as_slice(),
+            &kernel,
+            out,
+        )
     }
 }
 
@@ -160,12 +173,13 @@ type ProjectNodes<'a, const N: usize> = (
 );
 
 /// `DenseBackend::project` for a step `(scheme, h, t0, p0)` with the node values `(grads,
-/// G(x_j), x_j, v_j)` of its solution `zs`, `m` constraints and the model's node kernel
-/// `kernel`; writes the impulse and the end multipliers to `out`. Generic over the number
-/// of coordinates only: one copy serves every model of `N` coordinates.
+/// G(x_j), x_j, v_j)` of its solution `zs` and `rate = ∂g/∂t` at its end, `m` constraints
+/// and the model's node kernel `kernel`; writes the impulse and the end multipliers to
+/// `out`. Generic over the number of coordinates only: one copy serves every model of `N`
+/// coordinates.
 fn project<const N: usize>(
     (sch, h, t0, p0): (&Scheme, f64, f64, &SVector<f64, N>),
-    (grads, gjac, xs, vs): ProjectNodes<'_, N>,
+    ((grads, gjac, xs, vs), rate): (ProjectNodes<'_, N>, &[f64]),
     m: usize,
     zs: &[f64],
     kernel: &NodeKernel<'_, N>,
@@ -214,10 +228,11 @@ fn project<const N: usize>(
             }
         }
         for k in 0..m {
-            rhs[N + k] = -(0..N).map(|a| g1[(k, a)] * v[a]).sum::<f64>();
+            let rk = rate.get(k).copied().unwrap_or(0.0);
+            rhs[N + k] = -((0..N).map(|a| g1[(k, a)] * v[a]).sum::<f64>() + rk);
             size.1 = size
                 .1
-                .max((0..N).map(|a| (g1[(k, a)] * v[a]).abs()).sum::<f64>());
+                .max((0..N).map(|a| (g1[(k, a)] * v[a]).abs()).sum::<f64>() + rk.abs());
         }
         // Converged when both residuals are at the round-off of their terms.
         let noise = 16.0 * f64::EPSILON * (N + m) as f64;

@@ -21,7 +21,7 @@ mod sparse;
 
 pub(crate) use dense::DenseBackend;
 #[cfg(feature = "sparse")]
-pub(crate) use sparse::SparseBackend;
+pub(crate) use sparse::{ConstraintRate, SparseBackend};
 
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
@@ -194,8 +194,9 @@ pub(crate) trait StepBackend {
     /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
     /// over the last solved step (DESIGN §11); `None` without constraints.
     fn constraint_impulse(&self) -> Option<&[f64]>;
-    /// A constrained model: `[|g|, |G v|, |G|]` (max-norms) at `at = (t, q, v)`; zeros
-    /// without constraints.
+    /// A constrained model: `[|g|, |G v + ∂g/∂t|, |G| |v| + |∂g/∂t|]` (max-norms: the
+    /// position and velocity residuals, and the size of the latter's terms) at
+    /// `at = (t, q, v)`; zeros without constraints.
     fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error>;
     /// A constrained model: the multipliers at the end of the last solved step, as
     /// `h² λ_{s−1}` (the units of those of its earlier control points, which follow the

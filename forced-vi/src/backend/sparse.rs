@@ -40,7 +40,15 @@ pub(crate) struct SparseBackend<'a> {
     ptil: Vec<f64>,
     /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
     carry: bool,
+    /// A constrained model: `∂g/∂t` at `(t, q)` (see [`ConstraintRate`]) and its buffer.
+    rate: Option<ConstraintRate<'a>>,
+    rate_at: Vec<f64>,
 }
+
+/// Writes `∂g/∂t` at `(t, q)` into its last argument: the explicit time rate of a model's
+/// constraints, from its generic `constraints` with a dual number in `t` (the sparse
+/// kernels give `g` and `G` only). A step's end meets `G v + ∂g/∂t = 0` (DESIGN §11).
+pub(crate) type ConstraintRate<'a> = Box<dyn Fn(f64, &[f64], &mut [f64]) + 'a>;
 
 /// A constrained model's steps on this backend solve to this fraction of Newton's `rtol`.
 /// Its factors are kept across iterations and steps, so its iterates converge linearly and
@@ -66,6 +74,7 @@ impl<'a> SparseBackend<'a> {
         (pattern, g_pattern): (NodePattern, Option<NodePattern>),
         newton: NewtonOptions,
         constant_mass: bool,
+        rate: Option<ConstraintRate<'a>>,
     ) -> Result<Self, Error> {
         let velocity = VelocitySolver::new(&pattern, constant_mass)?;
         let saddle = match &g_pattern {
@@ -99,12 +108,14 @@ impl<'a> SparseBackend<'a> {
             carry: false,
             mu: vec![0.0; m],
             saddle,
+            rate,
+            rate_at: vec![0.0; m],
         })
     }
 
     /// The end of a constrained step (DESIGN §11), as the dense backend's `project`: the
     /// multipliers `μ = λ_{s−1}` and the velocity with `L_v(q_{k+1}, v) + h b_{s−1} Gᵀ μ = p̃`
-    /// and `G v = 0`, then the impulse of the constraint forces over the step.
+    /// and `G v + ∂g/∂t = 0`, then the impulse of the constraint forces over the step.
     fn project(&mut self) -> Result<(), StepFailure> {
         let (Some(saddle), Some(cons)) = (self.saddle.as_mut(), self.prob.cons.as_ref()) else {
             return Ok(());
@@ -137,13 +148,17 @@ impl<'a> SparseBackend<'a> {
                 .sum();
         }
         let g1 = cons.jac_at(s - 1);
-        let q1 = &prob.xs[(s - 1) * n..s * n];
+        let (t1, q1) = (prob.t0 + h, &prob.xs[(s - 1) * n..s * n]);
+        match &self.rate {
+            Some(rate) => rate(t1, q1, &mut self.rate_at),
+            None => self.rate_at.fill(0.0),
+        }
         saddle
             .end_of_step(
                 prob.node.get(),
                 &prob.pattern,
-                (&cons.pattern, g1),
-                (prob.t0 + h, q1, &self.ptil),
+                (&cons.pattern, g1, &self.rate_at),
+                (t1, q1, &self.ptil),
             )
             .map_err(StepFailure::Newton)?;
         for (e, (k, a)) in cons.pattern.entries().enumerate() {
@@ -379,7 +394,13 @@ impl StepBackend for SparseBackend<'_> {
     fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
         let prob = &mut self.prob;
         match prob.cons.as_mut() {
-            Some(c) => c.residuals(prob.node.get(), &prob.pattern, at),
+            Some(c) => {
+                match &self.rate {
+                    Some(rate) => rate(at.0, at.1, &mut self.rate_at),
+                    None => self.rate_at.fill(0.0),
+                }
+                c.residuals(prob.node.get(), &prob.pattern, at, &self.rate_at)
+            }
             None => Ok([0.0; 3]),
         }
     }

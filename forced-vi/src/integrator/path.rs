@@ -11,7 +11,7 @@ use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
 #[cfg(feature = "sparse")]
 use crate::{
-    backend::SparseBackend,
+    backend::{ConstraintRate, SparseBackend},
     model::{DualConstraints, NodePattern},
     sparse::equations::NodeRef,
     sparse::{record_constraint_patterns, record_node_pattern},
@@ -161,7 +161,13 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         };
         let constant_mass = M::STRUCTURE.constant_mass;
         let path = (self.linear_path, constant_mass);
-        sparse_backend_on(node, init.as_slices(), cons, scheme, newton, path)
+        let model = self.model;
+        let rate: Option<ConstraintRate<'_>> = (M::CONSTRAINED && cons > 0).then(|| {
+            Box::new(move |t: f64, q: &[f64], out: &mut [f64]| {
+                crate::model::general::constraint_rate_at(model, t, q, out)
+            }) as ConstraintRate<'_>
+        });
+        sparse_backend_on(node, init.as_slices(), (cons, rate), scheme, newton, path)
     }
 }
 
@@ -173,7 +179,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 fn sparse_backend_on<'s>(
     node: NodeRef<'s>,
     (q, v): (&[f64], Option<&[f64]>),
-    cons: usize,
+    (cons, rate): (usize, Option<ConstraintRate<'s>>),
     scheme: &'s Scheme,
     newton: NewtonOptions,
     (linear_path, constant_mass): (LinearPath, bool),
@@ -208,7 +214,15 @@ fn sparse_backend_on<'s>(
         }
         _ => {}
     }
-    SparseBackend::new(node, scheme, (pattern, g_pattern), newton, constant_mass).map(Some)
+    SparseBackend::new(
+        node,
+        scheme,
+        (pattern, g_pattern),
+        newton,
+        constant_mass,
+        rate,
+    )
+    .map(Some)
 }
 
 /// Refuses a model too large for the dense backend: more than

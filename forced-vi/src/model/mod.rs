@@ -389,6 +389,44 @@ pub mod general {
         }
     }
 
+    /// `∂g/∂t` at `(t, q)` into `rate` (`m` values): the explicit rate of constraints that
+    /// read the time, zero for those that do not. A motion on `g(t, q) = 0` meets
+    /// `G v + ∂g/∂t = 0` (DESIGN §11). One evaluation of [`ForcedLagrangian::constraints`] with
+    /// a dual number in `t`, its `q` on the heap (any `N`).
+    pub fn constraint_rate_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        t: f64,
+        q: &[f64],
+        rate: &mut [f64],
+    ) {
+        use num_dual::Dual64;
+        rate.fill(0.0);
+        let count = m.constraint_count();
+        // Small models (the dense backend's) on the stack, without allocating.
+        const SMALL: usize = 16;
+        if N <= SMALL && count <= SMALL {
+            let (mut x, mut g) = ([Dual64::from(0.0); SMALL], [Dual64::from(0.0); SMALL]);
+            for (xa, &v) in x.iter_mut().zip(q) {
+                *xa = Dual64::from(v);
+            }
+            if let Ok(arr) = <&[Dual64; N]>::try_from(&x[..N]) {
+                m.constraints(Dual64::new(t, 1.0), arr, &mut g[..count]);
+            }
+            for (r, gk) in rate.iter_mut().zip(&g[..count]) {
+                *r = gk.eps;
+            }
+            return;
+        }
+        let x: Vec<Dual64> = q.iter().map(|&v| Dual64::from(v)).collect();
+        let mut g = vec![Dual64::from(0.0); count];
+        if let Ok(arr) = <&[Dual64; N]>::try_from(&x[..]) {
+            m.constraints(Dual64::new(t, 1.0), arr, &mut g);
+        }
+        for (r, gk) in rate.iter_mut().zip(&g) {
+            *r = gk.eps;
+        }
+    }
+
     /// `Σ_r λ_r ∂²g_r/∂q²` at `(t, q)`, the constraints' curvature weighted by the
     /// multipliers.
     pub fn constraint_curvature_at<M: ForcedLagrangian<N>, const N: usize>(

@@ -112,24 +112,27 @@ impl StepConstraints {
         Ok(())
     }
 
-    /// `|g|`, `|G v|` and `|G|` (max-norms) at `(t, q, v)`, for the checks of initial data
+    /// `|g|`, `|G v + ∂g/∂t|` and the size of that sum's terms, `|G| |v| + |∂g/∂t|`
+    /// (max-norms), at `(t, q, v)` with `rate = ∂g/∂t` there, for the checks of initial data
     /// and the records (control point 0's buffers are overwritten).
     pub(crate) fn residuals(
         &mut self,
         node: &dyn SparseNode,
         node_pattern: &NodePattern,
         (t, q, v): (f64, &[f64], &[f64]),
+        rate: &[f64],
     ) -> Result<[f64; 3], Error> {
         self.eval(node, node_pattern, (0, t, q), &[])
             .map_err(|_| Error::NonFiniteModel { step: 0, t })?;
         let g_max = max_norm(self.g_at(0));
         let e = self.pattern.nnz();
         let jac = &self.jac[..e];
-        self.gv.fill(0.0);
+        self.gv.copy_from_slice(rate);
         for (i, (k, a)) in self.pattern.entries().enumerate() {
             self.gv[k] += jac[i] * v[a];
         }
-        Ok([g_max, max_norm(&self.gv), max_norm(jac)])
+        let size = max_norm(jac) * max_norm(v) + max_norm(rate);
+        Ok([g_max, max_norm(&self.gv), size])
     }
 }
 
@@ -243,13 +246,13 @@ impl Saddle {
     }
 
     /// The end of a constrained step: `v` and `μ̂` with `L_v(t, q, v) + Gᵀ μ̂ = p̃` and
-    /// `G v = 0`, by Newton from the guess in [`Self::v`] and `μ̂ = 0`, to the round-off of
-    /// the terms.
+    /// `G v + ∂g/∂t = 0` (`rate = ∂g/∂t` at `(t, q)`), by Newton from the guess in
+    /// [`Self::v`] and `μ̂ = 0`, to the round-off of the terms.
     pub(crate) fn end_of_step(
         &mut self,
         node: &dyn SparseNode,
         node_pattern: &NodePattern,
-        (g_pattern, g): (&NodePattern, &[f64]),
+        (g_pattern, g, rate): (&NodePattern, &[f64], &[f64]),
         (t, q, ptil): (f64, &[f64], &[f64]),
     ) -> Result<(), NewtonFailure> {
         let (n, m) = (self.n, self.m);
@@ -262,7 +265,7 @@ impl Saddle {
             if sink.outside() {
                 return Err(NewtonFailure::NonFinite);
             }
-            // rhs = −(L_v + Gᵀ μ̂ − p̃, G v), and the sizes of their terms.
+            // rhs = −(L_v + Gᵀ μ̂ − p̃, G v + ∂g/∂t), and the sizes of their terms.
             let mut size = (0.0f64, 0.0f64);
             let gt_mu = &mut self.rhs[..n];
             gt_mu.fill(0.0);
@@ -275,7 +278,10 @@ impl Saddle {
                 gt_mu[a] = -(self.lv[a] + x - ptil[a]);
             }
             let tail = &mut self.rhs[n..];
-            tail.fill(0.0);
+            for (x, r) in tail.iter_mut().zip(rate) {
+                *x = -r;
+                size.1 = size.1.max(r.abs());
+            }
             for (e, (k, a)) in g_pattern.entries().enumerate() {
                 tail[k] -= g[e] * self.v[a];
                 size.1 = size.1.max((g[e] * self.v[a]).abs());
@@ -336,13 +342,14 @@ impl Saddle {
 }
 
 /// [`InitialState::projected`](crate::InitialState::projected) on sparse storage: Gauss–Newton
-/// steps of least change onto `g(q) = 0`, then `v` onto `G v = 0`, each a solve with
-/// `[[I, Gᵀ], [G, 0]]`; `tol` is the initial-data check's relative tolerance
-/// ([`crate::initial::CONSTRAINT_TOL`]).
+/// steps of least change onto `g(0, q) = 0`, then `v` onto `G v + ∂g/∂t = 0` (`rate` writes
+/// `∂g/∂t` at `(0, q)`), each a solve with `[[I, Gᵀ], [G, 0]]`; `tol` is the initial-data
+/// check's relative tolerance ([`crate::initial::CONSTRAINT_TOL`]).
 pub(crate) fn project_initial(
     node: &dyn SparseNode,
     (q, v): (&mut [f64], &mut [f64]),
     tol: f64,
+    rate: &dyn Fn(&[f64], &mut [f64]),
 ) -> Result<(), Error> {
     let pattern = record_node_pattern(node, 0.0, q, v)?;
     let (g_pattern, _) = record_constraint_patterns(node, 0.0, q)?;
@@ -380,6 +387,7 @@ pub(crate) fn project_initial(
     let e = cons.pattern.nnz();
     let jac = &cons.jac[..e];
     let mut gv = vec![0.0; cons.m];
+    rate(q, &mut gv);
     for (i, (k, a)) in cons.pattern.entries().enumerate() {
         gv[k] += jac[i] * v[a];
     }

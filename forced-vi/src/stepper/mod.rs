@@ -302,7 +302,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         }
     }
 
-    /// [`Self::record_state`], with the constraint residual `max(|g|, |G v|)` among the
+    /// [`Self::record_state`], with the constraint residual `max(|g|, |G v + ∂g/∂t|)` among the
     /// diagnostics.
     fn record(
         &mut self,

@@ -84,7 +84,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         if model.constraint_count() > 0 {
             let at = (0.0, &state.q.sum[..], &state.v[..]);
             let residuals = backend.constraint_residuals(at)?;
-            crate::initial::check_constraints(&state.q.sum, &state.v, residuals)?;
+            crate::initial::check_constraints(&state.q.sum, residuals)?;
         }
         check_time_flag(model, &state.q.sum, &state.v)?;
         check_force_flag(model, &state.q.sum, &state.v)?;
