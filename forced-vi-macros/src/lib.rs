@@ -213,6 +213,36 @@ mod tests {
     }
 
     #[test]
+    fn only_constraints_that_name_t_read_the_time() {
+        let promise = "const CONSTRAINTS_READ_TIME : bool = false";
+        let fixed = expand(quote!(
+            coordinates(x, y),
+            lagrangian = (x_dot * x_dot + y_dot * y_dot) / 2,
+            constraints(x * x + y * y - k),
+        ));
+        assert!(
+            !fixed.contains("compile_error") && fixed.contains(promise),
+            "{fixed}"
+        );
+        for g in [
+            quote!(x * x + y * y - k * (w * t).cos()),
+            quote!(x * y - k * t),
+            quote!({
+                let s = (w * t).sin();
+                x - s
+            }),
+        ] {
+            let out = expand(quote!(
+                coordinates(x, y),
+                lagrangian = (x_dot * x_dot + y_dot * y_dot) / 2,
+                constraints(#g),
+            ));
+            assert!(!out.contains("compile_error"), "{out}");
+            assert!(!out.contains(promise), "{g}");
+        }
+    }
+
+    #[test]
     fn a_mass_that_depends_on_t_is_not_constant() {
         for l in [
             quote!(lagrangian = (1.0 + k * t) * x_dot * x_dot / 2 - x * x / 2),

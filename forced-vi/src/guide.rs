@@ -320,8 +320,10 @@
 //! constraint force `−Gᵀλ` of each step in [`StepRecord::constraint_force`](crate::StepRecord)
 //! and `max(|g|, |G v + ∂g/∂t|)` in `constraint_residual`. A constraint that reads `t` (a
 //! moving support, a driven linkage) moves the velocity-level constraint by its rate
-//! `∂g/∂t`, which the runtime takes from `constraints` with a dual number in `t`; it is
-//! zero for one that does not. Fixed and adaptive steps, dense output and
+//! `∂g/∂t`, which the runtime takes from `constraints` with a dual number in `t`, and its
+//! forces do the work `∫ λᵀ ∂g/∂t dt`, which the energy ledger adds. When no constraint
+//! names `t`, the attribute promises fixed constraints
+//! ([`ForcedLagrangian::CONSTRAINTS_READ_TIME`] `= false`) and neither is computed. Fixed and adaptive steps, dense output and
 //! ensembles work; non-Lobatto schemes and sensitivities of constrained models are
 //! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints

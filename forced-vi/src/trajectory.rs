@@ -25,8 +25,8 @@ pub struct StepRecord<const N: usize> {
     pub energy: f64,
     /// Energy-balance error `E(t_k) − E(0) − W_k + ∫₀^{t_k} ∂L/∂t`, with the work `W_k` of the
     /// force and the integral of `∂L/∂t` (zero for an autonomous model) summed with the
-    /// scheme's own quadrature (DESIGN §4, §7). A constraint that reads the time does work
-    /// that `W` leaves out, so on such a model this is not a conservation check.
+    /// scheme's own quadrature (DESIGN §4, §7). `W` includes the work `∫ λᵀ ∂g/∂t` of the
+    /// forces of constraints that read the time (zero for fixed ones).
     pub energy_balance: f64,
     /// Newton iterations (linear solves) this step took, over all attempts.
     pub newton_iterations: usize,

@@ -422,7 +422,16 @@ impl<'c, 'm> Gen<'c, 'm> {
                 }
             }
         });
+        // No constraint names `t`, so none reads it (`t` is not even bound in their code): the
+        // promise that lets the runtime leave out their rate `∂g/∂t`.
+        let reads_time = c.constraints.iter().any(|l| l.names.contains(TIME));
+        let read_time = (!reads_time).then(|| {
+            quote!(
+                const CONSTRAINTS_READ_TIME: bool = false;
+            )
+        });
         quote! {
+            #read_time
             fn constraint_count(&self) -> usize {
                 #count
             }

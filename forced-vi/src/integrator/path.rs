@@ -162,7 +162,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         let constant_mass = M::STRUCTURE.constant_mass;
         let path = (self.linear_path, constant_mass);
         let model = self.model;
-        let rate: Option<ConstraintRate<'_>> = (M::CONSTRAINED && cons > 0).then(|| {
+        let reads_time = M::CONSTRAINED && M::CONSTRAINTS_READ_TIME && cons > 0;
+        let rate: Option<ConstraintRate<'_>> = reads_time.then(|| {
             Box::new(move |t: f64, q: &[f64], out: &mut [f64]| {
                 crate::model::general::constraint_rate_at(model, t, q, out)
             }) as ConstraintRate<'_>

@@ -176,6 +176,14 @@ pub trait ForcedLagrangian<const N: usize> {
     /// promise is refused by [`crate::Integrator::new`] ([`crate::Error::InvalidModel`]).
     const CONSTRAINED: bool = true;
 
+    /// `false` promises that [`ForcedLagrangian::constraints`] does not read `t` (a fixed
+    /// constraint): the runtime then leaves out the rate `∂g/∂t` that a constraint reading
+    /// the time adds to the velocity-level constraint `G v + ∂g/∂t = 0` and to the work of
+    /// the constraint forces (DESIGN §11). The default, `true`, promises nothing (the rate is
+    /// computed, and is zero for a fixed constraint); the macro sets `false` when no
+    /// constraint names `t`.
+    const CONSTRAINTS_READ_TIME: bool = true;
+
     /// The number `m` of holonomic constraints `g(t, q) = 0` (DESIGN §11); none by default.
     fn constraint_count(&self) -> usize {
         0
@@ -392,7 +400,8 @@ pub mod general {
     /// `∂g/∂t` at `(t, q)` into `rate` (`m` values): the explicit rate of constraints that
     /// read the time, zero for those that do not. A motion on `g(t, q) = 0` meets
     /// `G v + ∂g/∂t = 0` (DESIGN §11). One evaluation of [`ForcedLagrangian::constraints`] with
-    /// a dual number in `t`, its `q` on the heap (any `N`).
+    /// a dual number in `t` (none for a model that promises fixed constraints,
+    /// [`ForcedLagrangian::CONSTRAINTS_READ_TIME`]).
     pub fn constraint_rate_at<M: ForcedLagrangian<N>, const N: usize>(
         m: &M,
         t: f64,
@@ -401,6 +410,9 @@ pub mod general {
     ) {
         use num_dual::Dual64;
         rate.fill(0.0);
+        if !M::CONSTRAINTS_READ_TIME {
+            return;
+        }
         let count = m.constraint_count();
         // Small models (the dense backend's) on the stack, without allocating.
         const SMALL: usize = 16;

@@ -116,14 +116,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// The ledger's increment over the step just solved: the work `h Σ b_i F·v` less
-    /// `h Σ b_i ∂L/∂t` (DESIGN §4, §7), from the model's own force and Lagrangian.
+    /// `h Σ b_i ∂L/∂t` (DESIGN §4, §7), from the model's own force and Lagrangian, plus the
+    /// work of the forces of constraints that read the time ([`Self::constraint_work`]).
     fn ledger_increment(&self, h: f64) -> f64 {
         let s = M::STRUCTURE;
-        if !(s.has_force || s.uses_time) {
+        let moving =
+            M::CONSTRAINED && M::CONSTRAINTS_READ_TIME && self.model.constraint_count() > 0;
+        if !(s.has_force || s.uses_time || moving) {
             return 0.0;
         }
+        let mut dw = if moving { self.constraint_work(h) } else { 0.0 };
+        if !(s.has_force || s.uses_time) {
+            return dw;
+        }
         let sch = self.scheme;
-        let mut dw = 0.0;
         for i in 0..sch.quadrature_nodes() {
             let (Ok(x), Ok(v)) = (
                 <&[f64; N]>::try_from(self.backend.node_x(i)),
@@ -142,6 +148,37 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
         }
         dw
+    }
+
+    /// The work of the constraint forces `−Gᵀλ` over the step just solved, `h Σ_j b_j λ_jᵀ
+    /// ∂g/∂t(t_j, x_j)`: along a motion on `g(t, q) = 0`, `G v = −∂g/∂t`, so their power
+    /// `−λᵀ G v` is `λᵀ ∂g/∂t`, zero for a fixed constraint (DESIGN §11). The multipliers are
+    /// the step's `ŵ_j = h² λ_j` at its control points (the quadrature nodes of a Lobatto
+    /// scheme) and its end multipliers.
+    fn constraint_work(&self, h: f64) -> f64 {
+        let sch = self.scheme;
+        let (s, m) = (sch.stages(), self.model.constraint_count());
+        let (lay, z, end) = (
+            self.backend.layout(),
+            self.backend.z(),
+            self.backend.end_multipliers(),
+        );
+        let mut rate = vec![0.0; m];
+        let mut w = 0.0;
+        for j in 0..s {
+            let tj = self.state.t_state + sch.c()[j] * h;
+            let x = self.backend.node_x(j);
+            crate::model::general::constraint_rate_at(self.model, tj, x, &mut rate);
+            for (k, r) in rate.iter().enumerate() {
+                let wk = if j + 1 < s {
+                    z[lay.multiplier(j, k)]
+                } else {
+                    end.get(k).copied().unwrap_or(0.0)
+                };
+                w += sch.b()[j] / h * wk * r;
+            }
+        }
+        w
     }
 
     /// What a sensitivity or adjoint run carries past a solved step: the tangent, then the
