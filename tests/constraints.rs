@@ -225,8 +225,35 @@ fn constraint_spherical_pendulum_keeps_its_vertical_momentum() {
     }
 }
 
+/// A hand-written pendulum whose pivot moves, `x_p = sin t`, that promises fixed
+/// constraints all the same.
+struct BrokenPromise;
+
+impl ForcedLagrangian<2> for BrokenPromise {
+    const CONSTRAINTS_READ_TIME: bool = false;
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] + v[1] * v[1]) * 0.5 - q[1] * G
+    }
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn constraints<D: Scalar>(&self, t: D, q: &[D; 2], g: &mut [D]) {
+        let dx = q[0] - t.sin();
+        g[0] = (dx * dx + q[1] * q[1] - L * L) * 0.5;
+    }
+}
+
 #[test]
 fn constraint_errors_are_typed() {
+    // A broken promise of fixed constraints: refused before the first step (the rate
+    // `∂g/∂t` would be left out), not a silently wrong run.
+    let broken = Integrator::new(&BrokenPromise, Scheme::lobatto(3).expect("s"), 0.01)
+        .expect("integrator")
+        .final_state(InitialState::from_velocity([0.0, -L], [0.0, 0.0]), 1.0);
+    assert!(
+        matches!(broken.map_err(|f| f.error), Err(Error::InvalidModel { .. })),
+        "a broken CONSTRAINTS_READ_TIME promise must be refused"
+    );
     let model = CartesianPendulum;
     let integ = Integrator::new(&model, Scheme::lobatto(3).expect("s"), 0.01).expect("integrator");
     // Off the circle, and a velocity across it.

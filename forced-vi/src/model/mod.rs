@@ -181,7 +181,8 @@ pub trait ForcedLagrangian<const N: usize> {
     /// the time adds to the velocity-level constraint `G v + ∂g/∂t = 0` and to the work of
     /// the constraint forces (DESIGN §11). The default, `true`, promises nothing (the rate is
     /// computed, and is zero for a fixed constraint); the macro sets `false` when no
-    /// constraint names `t`.
+    /// constraint names `t`. A model that breaks the promise at its initial positions is
+    /// refused by the first step ([`crate::Error::InvalidModel`]).
     const CONSTRAINTS_READ_TIME: bool = true;
 
     /// The number `m` of holonomic constraints `g(t, q) = 0` (DESIGN §11); none by default.

@@ -56,6 +56,35 @@ pub(super) fn check_time_flag<M: ForcedLagrangian<N>, const N: usize>(
     Ok(())
 }
 
+/// Refuses a constrained model that promises fixed constraints
+/// (`CONSTRAINTS_READ_TIME` false) while `constraints` changes with `t`: the rate `∂g/∂t`
+/// would be left out of its velocity-level constraint and its ledger. Checked, like the time
+/// flag, at the initial positions and at times beside 0: a dependence that vanishes there
+/// is not caught.
+pub(super) fn check_constraint_time_flag<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    q: &[f64],
+) -> Result<(), Error> {
+    let m = model.constraint_count();
+    if !M::CONSTRAINED || M::CONSTRAINTS_READ_TIME || m == 0 {
+        return Ok(());
+    }
+    let Ok(qa) = <&[f64; N]>::try_from(q) else {
+        return Ok(());
+    };
+    let (mut g0, mut gt) = (vec![0.0; m], vec![0.0; m]);
+    model.constraints(0.0, qa, &mut g0);
+    for t in [0.7390851332151607, -2.5, 1e3] {
+        model.constraints(t, qa, &mut gt);
+        if gt.iter().zip(&g0).any(|(a, b)| a.to_bits() != b.to_bits()) {
+            return Err(Error::InvalidModel {
+                message: "constraints depend on t, but CONSTRAINTS_READ_TIME is false".into(),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Refuses a model that has a force but says it has none (`STRUCTURE.has_force` false
 /// while `force` or `force_at` is not zero): the integrator would leave the force out and
 /// return the conservative motion (measured on a hand-written damped model: an `Ok` at

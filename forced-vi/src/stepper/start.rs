@@ -2,8 +2,8 @@
 //! the other (DESIGN §3), and the stepper's first state.
 
 use super::checks::{
-    check_finite, check_force_flag, check_run, check_structure_flags, check_time_flag, non_finite,
-    step_count,
+    check_constraint_time_flag, check_finite, check_force_flag, check_run, check_structure_flags,
+    check_time_flag, non_finite, step_count,
 };
 use super::state::State;
 use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
@@ -87,6 +87,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             crate::initial::check_constraints(&state.q.sum, residuals)?;
         }
         check_time_flag(model, &state.q.sum, &state.v)?;
+        check_constraint_time_flag(model, &state.q.sum)?;
         check_force_flag(model, &state.q.sum, &state.v)?;
         check_structure_flags(model, &state.q.sum, &state.v)?;
         let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
