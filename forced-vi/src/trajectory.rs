@@ -188,12 +188,11 @@ pub struct AdjointGradient<const N: usize> {
 /// `O(h^min(3, p))` for a scheme of order `p` (measured in the `dense_` tests). The
 /// Galerkin path itself is only `O(h^s)` between its control points.
 ///
-/// So with a scheme of order above 4 and long steps, the interpolant is less accurate than
-/// the steps' ends. An adaptive run with [`output::Samples`](crate::output::Samples) keeps
-/// its outputs to the tolerance: a step over an output time whose interpolant misses it
-/// (measured against the step polynomial at the interior nodes) is taken again to end on
-/// that time, up to one step more per output time. A fixed-step run interpolates at the
-/// step the caller chose.
+/// So with a scheme of order 4 or more and long steps, the interpolant is less accurate
+/// than the steps' ends. An adaptive run with [`output::Samples`](crate::output::Samples)
+/// keeps its outputs to the tolerance by ending a step on every output time, up to one step
+/// more per output time (see [`crate::control`], "Output times"). A fixed-step run
+/// interpolates at the step the caller chose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct DenseState<const N: usize> {

@@ -85,8 +85,8 @@ pub struct Final;
 /// fixed or adaptive, is free of the output grid. The times must be finite and non-negative
 /// ([`Error::InvalidOutputTime`] otherwise), non-decreasing and at most `t_final`
 /// ([`Error::UnorderedTimes`] otherwise). An adaptive run keeps the samples to its
-/// tolerance, ending a step on an output time where interpolation would miss it (see
-/// [`DenseState`]). Only the last step is
+/// tolerance by ending a step on every output time (up to one step more per output time;
+/// see [`DenseState`]); a fixed-step run interpolates between its steps. Only the last step is
 /// held, so memory grows with the samples, not the steps. On failure the samples before it
 /// come back in [`RunFailure::samples`].
 #[derive(Clone, Copy, Debug)]

@@ -40,18 +40,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         loop {
             let remaining = self.t_final - t0;
             let mut h = self.h_next.min(remaining).min(self.options.max_step);
-            // A step over the next output time is at most the step whose dense output meets
-            // the tolerance there (`h_dense`, see `dense_output_misses`), or, where that
-            // would not reach the output time, ends on it.
+            // A step over the next output time ends on it: the output is then a step's end,
+            // to the tolerance (see `crate::control`, "Output times").
             let planned = h;
             let mut landing = None;
             if let Some(ts) = self.stop.filter(|&ts| ts - t0 >= h_floor && ts - t0 < h) {
-                if self.h_dense < ts - t0 {
-                    landing = Some(ts);
-                    h = ts - t0;
-                } else {
-                    h = h.min(self.h_dense);
-                }
+                landing = Some(ts);
+                h = ts - t0;
             }
             // No sliver of a step at the end: the step goes to the end where that is at
             // most a step the controller predicts to pass (see `Controller::stretch`), and
@@ -103,24 +98,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     ratio,
                 });
             }
-            // An output time inside an accepted step: where the step's dense output misses
-            // the tolerance, the step is taken again, shorter or ending on the output time
-            // (before the tangent or the tape go through it).
-            if let (Ok((_, err)), None) = (&solved, landing) {
-                let inside = self
-                    .stop
-                    .is_some_and(|ts| ts - t0 >= h_floor && ts < t0 + h * (1.0 - 1e-10));
-                if *err <= 1.0 && inside {
-                    let (missed, allowed) = self.dense_output_misses(h, tol);
-                    if missed {
-                        self.h_dense = allowed;
-                        self.stats.rejected_steps += 1;
-                        self.state.copy_from(&self.saved);
-                        continue;
-                    }
-                    self.h_dense = allowed.max(h);
-                }
-            }
             // The tangent (of a sensitivity run) goes through accepted steps only.
             let solved = match solved {
                 Ok((res, err)) if err <= 1.0 => self.carry().map(|()| (res, err)),
@@ -162,58 +139,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             self.stats.rejected_steps += 1;
             self.state.copy_from(&self.saved);
         }
-    }
-
-    /// Whether the dense output (the cubic Hermite interpolant of `q` and `v` at the step's
-    /// ends, `crate::trajectory::DenseState`) of the step of size `h` just taken from the
-    /// saved state misses the tolerance, and the step at which it would meet it: its
-    /// positions or velocities at the step's interior quadrature nodes differ from the step
-    /// polynomial's there by `r` times `atol + rtol |·|` at most, with `r > 1` a miss; the
-    /// step is `h` times `0.9 r^{−1/4}` for positions and `0.9 r^{−1/3}` for velocities
-    /// (the interpolant's orders), within `[0.2, 2]`. The interpolant is of order 4 in `q`
-    /// and 3 in `v`, the step polynomial of order `s` between its nodes (its end, of order
-    /// `2s − 2`, is what the controller bounds), so for a scheme of order above 4 the
-    /// difference measures the interpolant's error; of order 4 or less the interpolant is
-    /// at least as accurate as the scheme and is not checked. Measured before this check
-    /// (damped oscillator, 1001 output times over `T = 10`): lobatto5 at tol 1e-10 ended
-    /// within 8e-13 of the exact state with outputs off by 8e-6, lobatto7 by 1.5e-3.
-    fn dense_output_misses(&self, h: f64, tol: &Tolerance<N>) -> (bool, f64) {
-        let sch = self.scheme;
-        if sch.order() <= 4 {
-            return (false, f64::INFINITY);
-        }
-        let (mut rq, mut rv) = (0.0f64, 0.0f64);
-        let (q0, v0) = (&self.saved.q.sum, &self.saved.v);
-        let (q1, v1) = (&self.state.q.sum, &self.v_end);
-        for (i, &th) in sch.c().iter().enumerate() {
-            if !(th > 0.0 && th < 1.0) {
-                continue;
-            }
-            let (t2, t3) = (th * th, th * th * th);
-            let (h00, h10) = (2.0 * t3 - 3.0 * t2 + 1.0, t3 - 2.0 * t2 + th);
-            let (h01, h11) = (3.0 * t2 - 2.0 * t3, t3 - t2);
-            let (d00, d10) = (6.0 * (t2 - th), 3.0 * t2 - 4.0 * th + 1.0);
-            let (d01, d11) = (6.0 * (th - t2), 3.0 * t2 - 2.0 * th);
-            let (x, v) = (self.backend.node_x(i), self.backend.node_v(i));
-            for a in 0..N {
-                let hq = h00 * q0[a] + h10 * h * v0[a] + h01 * q1[a] + h11 * h * v1[a];
-                let hv = (d00 * q0[a] + d01 * q1[a]) / h + d10 * v0[a] + d11 * v1[a];
-                let (rtol, atol) = (tol.rtol[a], tol.atol[a]);
-                let wq = atol + rtol * q0[a].abs().max(q1[a].abs());
-                let wv = atol + rtol * v0[a].abs().max(v1[a].abs());
-                // NaN-propagating maxima: a NaN counts as a miss.
-                let (eq, ev) = ((hq - x[a]).abs() / wq, (hv - v[a]).abs() / wv);
-                rq = if eq > rq || eq.is_nan() { eq } else { rq };
-                rv = if ev > rv || ev.is_nan() { ev } else { rv };
-            }
-        }
-        let factor = 0.9 * rq.powf(-0.25).min(rv.powf(-1.0 / 3.0));
-        let factor = if factor.is_nan() {
-            0.2
-        } else {
-            factor.clamp(0.2, 2.0)
-        };
-        (!(rq <= 1.0 && rv <= 1.0), h * factor)
     }
 
     /// The weighted norm, per unit step, of the estimated local error of the step of size

@@ -228,10 +228,8 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).
     tape: Option<Box<adjoint::Tape>>,
     /// Adaptive runs with [`output::Samples`](crate::output::Samples): the next output
-    /// time, and the longest step over one whose dense output meets the tolerance, as last
-    /// measured (see `Stepper::dense_output_misses`).
+    /// time, on which a step ends.
     stop: Option<f64>,
-    h_dense: f64,
     /// The stack a step needs ([`step_stack_bytes`]).
     stack: usize,
     stats: RunStats,
@@ -329,9 +327,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         self.lean = lean;
     }
 
-    /// The next output time of the run, if any: an adaptive step over it whose dense output
-    /// would miss the tolerance there is taken again, shorter or ending on it (see
-    /// `Stepper::dense_output_misses`).
+    /// The next output time of the run, if any: an adaptive step over it ends on it (see
+    /// [`crate::control`], "Output times").
     pub(crate) fn set_next_output(&mut self, t: Option<f64>) {
         self.stop = t;
     }

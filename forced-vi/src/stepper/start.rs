@@ -138,7 +138,6 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             stack,
             stats: RunStats::default(),
             stop: None,
-            h_dense: f64::INFINITY,
             started: false,
             done: false,
         })
