@@ -250,6 +250,54 @@ fn trust_adaptive_samples_meet_the_tolerance() {
     }
 }
 
+/// Two damped oscillators, `L = ½|v|² − ½(q₀² + 4q₁²)`, `F = −c v`.
+struct DampedPair {
+    c: f64,
+}
+
+impl ForcedLagrangian<2> for DampedPair {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+        (v[0] * v[0] + v[1] * v[1] - q[0] * q[0] - q[1] * q[1] * 4.0) * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+        [-v[0] * self.c, -v[1] * self.c]
+    }
+}
+
+/// A pure relative tolerance (`atol = 0`, which `Tolerance` accepts with `rtol > 0`) on a
+/// coordinate held at exactly zero, or on a momentum that starts at zero. Its weight
+/// `atol + rtol |y|` is zero, and so was its error: `0 · ∞` made every estimate NaN, and
+/// every such run ended in `StepSizeTooSmall` at t = 0 (measured on lobatto2, 3 and 5 at
+/// rtol 1e-6 and 1e-9, per coordinate too, and at rest at the equilibrium). An error of
+/// exactly zero now weighs nothing: the runs end `Ok`, within the tolerance.
+#[test]
+fn trust_a_pure_relative_tolerance_on_a_zero_coordinate_runs() {
+    let c = 0.1;
+    let model = DampedPair { c };
+    let init = InitialState::from_velocity([1.0, 0.0], [0.0, 0.0]);
+    for s in [2, 3, 5] {
+        for rtol in [1e-6, 1e-9] {
+            let integ = Integrator::adaptive(&model, Scheme::lobatto(s).unwrap(), rtol, 0.0);
+            let end = integ
+                .unwrap()
+                .final_state(init, 10.0)
+                .unwrap_or_else(|f| panic!("lobatto{s} rtol {rtol:e}: {}", f.error));
+            let err = (end.q[0] - damped_exact(c, 10.0)).abs();
+            assert!(
+                err <= 10.0 * rtol,
+                "lobatto{s} rtol {rtol:e}: error {err:e}"
+            );
+            assert_eq!(end.q[1], 0.0);
+        }
+    }
+    let rest = InitialState::from_velocity([0.0, 0.0], [0.0, 0.0]);
+    let end = Integrator::adaptive(&model, Scheme::lobatto(3).unwrap(), 1e-8, 0.0)
+        .unwrap()
+        .final_state(rest, 10.0)
+        .unwrap_or_else(|f| panic!("at rest: {}", f.error));
+    assert_eq!(end.q.as_slice(), [0.0, 0.0]);
+}
+
 /// A loss whose gradient is NaN or infinite at the final state is the caller's error, named
 /// as such (it used to read as a non-finite model value), and keeps the forward run's steps.
 #[test]

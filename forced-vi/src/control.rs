@@ -239,6 +239,10 @@ impl<const N: usize> Tolerance<N> {
     }
 
     /// One pair per coordinate. Each must be finite and non-negative, and not both zero.
+    /// `atol = 0` is a pure relative tolerance: a position or momentum held at exactly zero
+    /// with no error weighs nothing, and one that is zero at a step's end while its error
+    /// is not cannot meet it (the run ends in [`Error::StepSizeTooSmall`] there); give an
+    /// `atol` to components that cross zero.
     pub fn per_component(rtol: [f64; N], atol: [f64; N]) -> Result<Self, Error> {
         for i in 0..N {
             let (r, a) = (rtol[i], atol[i]);
@@ -295,10 +299,10 @@ impl<const N: usize> Tolerance<N> {
                 // tolerance finer than that cannot be met, and the step size runs into its
                 // floor. The floor is not scaled per unit step: smaller steps do not lower
                 // it, and must not raise it either.
-                let e = (d.abs() * per_unit).max(2.0 * f64::EPSILON * size) * inv;
+                let e = weighted((d.abs() * per_unit).max(2.0 * f64::EPSILON * size), inv);
                 sum += e * e;
                 if let Some((cq, cp)) = cut {
-                    let c = if k == 0 { cq[i] } else { cp[i] } * inv;
+                    let c = weighted(if k == 0 { cq[i] } else { cp[i] }, inv);
                     sum_cut += c * c;
                 }
             }
@@ -335,12 +339,23 @@ impl<const N: usize> Tolerance<N> {
         for i in 0..N {
             for y in [q[i], p[i]] {
                 let size = y.abs();
-                let e = 2.0 * f64::EPSILON * size / (self.atol[i] + self.rtol[i] * size);
+                let e = weighted(
+                    2.0 * f64::EPSILON * size,
+                    1.0 / (self.atol[i] + self.rtol[i] * size),
+                );
                 sum += e * e;
             }
         }
         sum / (2 * N).max(1) as f64
     }
+}
+
+/// `e` in units of a weight whose inverse is `inv`, with an error of exactly zero weighing
+/// nothing: a component held at exactly zero under a pure relative tolerance (`atol = 0`)
+/// has a weight of zero, and no error to weigh.
+#[inline(always)]
+fn weighted(e: f64, inv: f64) -> f64 {
+    if e == 0.0 { 0.0 } else { e * inv }
 }
 
 /// The PI step-size controller.

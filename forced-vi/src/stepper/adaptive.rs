@@ -240,9 +240,12 @@ fn first_step(
     let n = st.v.len();
     let (q0, p0, v0) = (&st.q.sum, &st.p.sum, &st.v);
     let w = |i: usize, y: f64| atol[i] + rtol[i] * y.abs();
+    // A zero over a zero weight (a pure relative tolerance on a value at zero) weighs
+    // nothing; a value other than zero over one is infinite, and the step starts small.
+    let ratio = |x: f64, w: f64| if x == 0.0 { 0.0 } else { x / w };
     let rms = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
         let sum: f64 = (0..n)
-            .map(|i| (a(i) / w(i, q0[i])).powi(2) + (b(i) / w(i, p0[i])).powi(2))
+            .map(|i| ratio(a(i), w(i, q0[i])).powi(2) + ratio(b(i), w(i, p0[i])).powi(2))
             .sum();
         (sum / (2 * n).max(1) as f64).sqrt()
     };
@@ -251,7 +254,7 @@ fn first_step(
     let d0 = rms(&|i| q0[i], &|i| p0[i]);
     let d1 = rms(&|i| v0[i], &|i| fq0[i]);
     let cap = span.min(max_step);
-    let h0 = if d0 < 1e-5 || d1 < 1e-5 {
+    let h0 = if d0 < 1e-5 || d1 < 1e-5 || !d1.is_finite() {
         1e-6
     } else {
         0.01 * d0 / d1
@@ -269,7 +272,7 @@ fn first_step(
         Ok(()) => {
             let d2 = rms(&|i| v1[i] - v0[i], &|i| fq1[i] - fq0[i]) / h0;
             let dmax = d1.max(d2);
-            let h1 = if dmax <= 1e-15 {
+            let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
                 (h0 * 1e-3).max(1e-6)
             } else {
                 (0.01 / dmax).powf(1.0 / (p + 1.0))
