@@ -109,11 +109,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.round_off_sq = round_off;
                         self.unresolved = unresolved;
                         self.estimate = err / per_unit;
+                        let chosen = self.controller;
                         self.h_next = self.controller.accept(h, err);
                         if h < planned && !last {
                             // Cut short for an output time: the step the controller planned
-                            // stays on offer.
+                            // stays on offer, and its history stays that of the steps it
+                            // chose (the short step's small error would hold the next
+                            // step back).
                             self.h_next = self.h_next.max(planned);
+                            self.controller = chosen;
                         }
                         if self.band && (BAND.0 * h..=BAND.1 * h).contains(&self.h_next) {
                             self.h_next = h;
