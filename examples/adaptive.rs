@@ -13,9 +13,9 @@ fn main() -> Result<(), forced_vi::Error> {
         "{} steps, {} rejected",
         run.stats.steps, run.stats.rejected_steps
     );
-    // The state at given times, to the tolerance: a step over one of them whose cubic
-    // interpolant would miss it is shortened or ends on it. (`run.at(t)` interpolates the
-    // records as they are, with a cubic: less accurate than lobatto4's steps.)
+    // The state at given times, to the tolerance: a step over one of them ends on it.
+    // (`run.at(t)` interpolates the records as they are, with a cubic: less accurate than
+    // lobatto4's steps.)
     let samples = integ
         .solve(init, 10.0, output::Samples(&[2.5, 5.0, 7.5]))
         .map_err(|failure| failure.error)?;
