@@ -251,7 +251,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     }
 
     /// Adaptive runs: the smallest step (default 0). A run that needs a smaller one (other
-    /// than to end on `t_final`) stops with [`Error::StepSizeTooSmall`]. Fails unless it is
+    /// than to end on `t_final` or on an output time of
+    /// [`output::Samples`]) stops with [`Error::StepSizeTooSmall`]. Fails unless it is
     /// finite, non-negative and at most [`StepOptions::max_step`].
     pub fn min_step(mut self, h: f64) -> Result<Self, Error> {
         self.options.min_step = h;

@@ -34,17 +34,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             .max(super::StepOptions::SMALLEST_STEP);
         let mut iters = 0;
         let mut last_failure = None;
-        // A step shorter than this never needs to end on an output time: the dense output
-        // that close to a step's start is the start.
-        let h_floor = h_min.max(self.options.min_step);
         loop {
             let remaining = self.t_final - t0;
             let mut h = self.h_next.min(remaining).min(self.options.max_step);
             // A step over the next output time ends on it: the output is then a step's end,
-            // to the tolerance (see `crate::control`, "Output times").
+            // to the tolerance (see `crate::control`, "Output times"). Like the last step,
+            // it may be shorter than `min_step`, which bounds the steps the controller
+            // chooses (an output closer than that to a step's start was interpolated: 1.6e6
+            // times the tolerance off with lobatto5, outputs 0.004 apart, `min_step` 0.01).
+            // Closer than the smallest step a run takes, the output is the step's start.
             let planned = h;
             let mut landing = None;
-            if let Some(ts) = self.stop.filter(|&ts| ts - t0 >= h_floor && ts - t0 < h) {
+            if let Some(ts) = self.stop.filter(|&ts| ts - t0 >= h_min && ts - t0 < h) {
                 landing = Some(ts);
                 h = ts - t0;
             }
@@ -60,7 +61,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             if last {
                 h = remaining;
             }
-            if h < h_min || !h.is_finite() || (!last && h < self.options.min_step) {
+            let chosen = !last && landing.is_none();
+            if h < h_min || !h.is_finite() || (chosen && h < self.options.min_step) {
                 return Err(match last_failure {
                     Some(f) => self.failure_error(f, t0),
                     None => Error::StepSizeTooSmall { t: t0, h },
