@@ -97,6 +97,8 @@ struct Tables {
     /// there is besides the `E` part for a constant mass matrix (where `C ≡ 0`).
     a_terms: Vec<JacobianTerm>,
     b_terms: Vec<JacobianTerm>,
+    /// `terms` gathered by Jacobian block (see [`BlockSum`]).
+    block_sums: Vec<BlockSum>,
     /// `b_i Φ_ij` and `b_i Ψ_ij`, row `j` (see [`Scheme::residual_weights`]).
     res_phi: Vec<f64>,
     res_psi: Vec<f64>,
@@ -129,6 +131,22 @@ pub(crate) struct EstimateTables {
     /// The Lagrange basis of the step's control points at the reference's control points
     /// `0 … r − 2` (row `j`): a constrained step's multipliers there.
     pub(crate) lift_lambda: Vec<f64>,
+}
+
+/// The terms of one block `∂G_j/∂x_m` of the step Jacobian, gathered by the node block
+/// they weigh: `(i, w)` adds `w A_i` (times `h`), `w B_i`, `w C_i` or `w E_i` (over `h`).
+/// The same coefficients as [`JacobianTerm`], without the zeros, so that a block is summed
+/// in one place and written once.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BlockSum {
+    /// Residual block row.
+    pub(crate) j: usize,
+    /// Unknown block column (`m ≥ 1`).
+    pub(crate) m: usize,
+    pub(crate) a: Vec<(usize, f64)>,
+    pub(crate) b: Vec<(usize, f64)>,
+    pub(crate) c: Vec<(usize, f64)>,
+    pub(crate) e: Vec<(usize, f64)>,
 }
 
 /// One term of `∂G_j/∂x_m = Σ_i b_i [h Φ_ij Φ_im A_i + Φ_ij Ψ_im B_i + Ψ_ij Φ_im C_i
@@ -253,6 +271,29 @@ impl Scheme {
                 }
             }
         }
+        let mut block_sums = Vec::with_capacity((s - 1) * (s - 1));
+        for m in 1..s {
+            for j in 0..s - 1 {
+                let mut sum = BlockSum {
+                    j,
+                    m,
+                    ..BlockSum::default()
+                };
+                for t in terms.iter().filter(|t| t.j == j && t.m == m) {
+                    for (list, w) in [
+                        (&mut sum.a, t.a),
+                        (&mut sum.b, t.b),
+                        (&mut sum.c, t.c),
+                        (&mut sum.e, t.e),
+                    ] {
+                        if w != 0.0 {
+                            list.push((t.i, w));
+                        }
+                    }
+                }
+                block_sums.push(sum);
+            }
+        }
         let extrapolation: Vec<f64> = (0..s * s)
             .map(|k| lagrange(&d, k % s, 1.0 + d[k / s]))
             .collect();
@@ -284,6 +325,7 @@ impl Scheme {
                 psi,
                 a_terms: terms.iter().copied().filter(|t| t.a != 0.0).collect(),
                 b_terms: terms.iter().copied().filter(|t| t.b != 0.0).collect(),
+                block_sums,
                 res_phi,
                 res_psi,
                 terms,
@@ -366,6 +408,11 @@ impl Scheme {
     /// The non-zero terms of the Jacobian chain rule.
     pub fn jacobian_terms(&self) -> &[JacobianTerm] {
         &self.t.terms
+    }
+
+    /// The terms gathered by Jacobian block, every block `(j, m)` once, column by column.
+    pub(crate) fn block_sums(&self) -> &[BlockSum] {
+        &self.t.block_sums
     }
 
     /// The terms with a non-zero coefficient on `A`, and those with one on `B`.
