@@ -377,6 +377,34 @@ mod report_orders {
         }
     }
 
+    /// A pre-asymptotic wiggle that falls into the dropped tail (a point above its
+    /// larger-`h` neighbour, as on the double pendulum's lobatto7 sweep) does not raise the
+    /// noise that the points above the tail must clear: the median does not see it, where
+    /// the tail's largest error dropped every point below 10 times the wiggle.
+    #[test]
+    fn a_wiggle_in_the_tail_does_not_raise_the_noise() {
+        let mut pts: Vec<(f64, f64)> = (0..40)
+            .map(|k| {
+                let h = 0.85f64.powi(k);
+                (h, 1e-2 * h.powi(8) + 1e-14 * (1.0 + (k % 3) as f64))
+            })
+            .collect();
+        // A bump of 20 at the point whose clean error is just below 3e-13.
+        let k = pts
+            .iter()
+            .position(|&(_, e)| e < 3e-13)
+            .expect("the sweep reaches 3e-13");
+        pts[k].1 *= 20.0;
+        let wiggle = pts[k].1;
+        let fit = observed_order(&pts, 1.0).unwrap();
+        assert!((fit.order - 8.0).abs() < 0.3, "{}", fit.order);
+        assert!(
+            fit.used.iter().any(|&(_, e)| e < 10.0 * wiggle),
+            "{wiggle:e}: {:?}",
+            fit.used
+        );
+    }
+
     #[test]
     fn too_few_points_give_none() {
         assert!(observed_order(&[(1.0, 1e-4), (0.5, 1e-5)], 1.0).is_none());

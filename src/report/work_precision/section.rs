@@ -239,11 +239,13 @@ fn observed_orders(summary: &Summary) -> String {
         "### Observed orders\n\n\
          Least-squares slopes of log(error) against log(h) over the asymptotic range, which \
          sits just above the round-off floor: of the points with error between {:.0e}·s \
-         (round-off) and {:.0e}·s (pre-asymptotic), s = max(1, |reference|), the {} smallest \
+         (round-off) and {:.0e}·s (pre-asymptotic), s = max(1, |reference|), and above a \
+         scattered round-off tail at {} times its median error or more, the {} smallest \
          step sizes start the fit, and larger ones join while their segment's slope stays \
          within {} of the fit (`src/report/orders.rs`). `orders.csv` holds the order in q.\n\n",
         orders::FLOOR,
         orders::CEILING,
+        orders::FLOOR_MARGIN,
         orders::MIN_POINTS,
         orders::TRIM
     );
