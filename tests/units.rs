@@ -735,6 +735,78 @@ mod report_step_cost {
     }
 }
 
+mod report_equal_error {
+    use forced_vi::SchemeId;
+    use forced_vi_scenes::report::work_precision::equal_error::*;
+    use forced_vi_scenes::report::work_precision::{Mode, Row, Spread, Summary};
+    use forced_vi_scenes::report::Method;
+
+    fn row(mode: Mode, h_or_tol: f64, steps: usize, seconds: f64, err: f64) -> Row {
+        let e = Spread {
+            min: err,
+            mean: err,
+            max: err,
+        };
+        Row {
+            scene: "s",
+            method: Method::Variational(SchemeId::Lobatto(4)),
+            mode,
+            h_or_tol,
+            steps,
+            member_steps_min: steps,
+            newton_iters: steps,
+            seconds,
+            err: [e; 3],
+        }
+    }
+
+    /// On power laws the interpolation is exact: an adaptive run at the error of 30 uniform
+    /// steps, taking 30 steps in twice their time, is a time ratio of 2 from steps 1 and
+    /// per-step cost 2; runs too short, within the floor or outside the curve are left out.
+    #[test]
+    fn adaptive_runs_are_read_against_the_fixed_curve_at_their_error() {
+        let err = |n: f64| n.powi(-6);
+        let mut rows: Vec<Row> = [10usize, 20, 40, 80]
+            .iter()
+            .map(|&n| {
+                row(
+                    Mode::Fixed,
+                    1.0 / n as f64,
+                    n,
+                    n as f64 * 1e-6,
+                    err(n as f64),
+                )
+            })
+            .collect();
+        rows.push(row(Mode::Adaptive, 1e-8, 30, 60e-6, err(30.0)));
+        rows.push(row(Mode::Adaptive, 1e-6, 3, 6e-6, err(12.0)));
+        rows.push(row(Mode::Adaptive, 1e-4, 5, 1e-5, err(5.0)));
+        rows.push(row(Mode::Adaptive, 1e-12, 90, 1e-4, 1e-16));
+        let summary = Summary {
+            methods: vec![Method::Variational(SchemeId::Lobatto(4))],
+            rows,
+            ..Summary::default()
+        };
+        let lines = lines(&summary, "s", |e| e < 1e-13);
+        assert_eq!(lines.len(), 1);
+        let p = &lines[0].pairs;
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert_eq!(p[0].tol, 1e-8);
+        assert!((p[0].time - 2.0).abs() < 1e-9, "{p:?}");
+        assert!((p[0].steps - 1.0).abs() < 1e-9, "{p:?}");
+        assert!((p[0].per_step() - 2.0).abs() < 1e-9, "{p:?}");
+        // Between two fixed runs, not at one: 25 steps.
+        let fixed: Vec<&Row> = summary
+            .rows
+            .iter()
+            .filter(|r| r.mode == Mode::Fixed)
+            .collect();
+        let n = fixed_at(&fixed, err(25.0), |r| r.steps as f64).unwrap();
+        assert!((n - 25.0).abs() < 1e-9, "{n}");
+        assert_eq!(fixed_at(&fixed, err(5.0), |r| r.seconds), None);
+    }
+}
+
 mod report_external {
     use forced_vi_scenes::report::work_precision::external::*;
     use forced_vi_scenes::report::work_precision::Summary;

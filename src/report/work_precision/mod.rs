@@ -46,6 +46,7 @@ use crate::report::table::write_csv;
 use crate::report::{readme, Method, Options, ReportError};
 use crate::scenes::{self, Scene};
 
+pub mod equal_error;
 pub mod external;
 pub mod figures;
 pub mod large;

@@ -4,11 +4,12 @@ use std::fmt::Write as _;
 
 use forced_vi::Scheme;
 
+use super::equal_error::{self, Line};
 use super::external::{ExternalRow, HEYOKA_LABEL, HEYOKA_PATH};
 use super::figures::{Figures, BALANCE_FLOOR};
 use super::large;
 use super::long_run::LONG_RUN_REFERENCE_H;
-use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Paired, Row, Summary};
+use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Paired, Summary};
 use super::sweep::reference_scale;
 use crate::report::orders::{self, Fit};
 use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
@@ -39,6 +40,7 @@ pub fn markdown_section(i: &Inputs<'_>) -> String {
     md.push_str(&scenes_and_methods(i));
     md.push_str(&observed_orders(i.summary));
     md.push_str(&adaptive(i.plan, i.scenes, i.summary));
+    md.push_str(&adaptive_cost(i.scenes, i.summary));
     md.push_str(&cheapest(i.scenes, i.summary));
     md.push_str(&paired(i.summary));
     md.push_str(&large_models(i.summary));
@@ -384,6 +386,88 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
     md
 }
 
+/// Adaptive runs against the fixed-step curve of their scheme at equal error.
+fn adaptive_cost(scenes: &[&dyn Scene], summary: &Summary) -> String {
+    let lines: Vec<Line> = scenes
+        .iter()
+        .flat_map(|s| {
+            let scale = reference_scale(*s)[0];
+            equal_error::lines(summary, s.name(), |e| orders::at_floor(e, scale))
+        })
+        .collect();
+    if lines.is_empty() {
+        return String::new();
+    }
+    let medians: Vec<f64> = lines.iter().map(|l| l.median(|p| p.time)).collect();
+    let span = |v: &[f64]| {
+        v.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
+    };
+    let (lo, hi) = span(&medians);
+    let met = medians
+        .iter()
+        .filter(|&&x| x <= ADAPTIVE_COST_TARGET)
+        .count();
+    let steps: Vec<f64> = lines.iter().map(|l| l.median(|p| p.steps)).collect();
+    let per_step: Vec<f64> = lines.iter().map(|l| l.median(|p| p.per_step())).collect();
+    let ((s_lo, s_hi), (c_lo, c_hi)) = (span(&steps), span(&per_step));
+    let step_bound = steps.iter().filter(|&&x| x <= 1.1).count();
+    let cost_bound = steps.iter().zip(&per_step).filter(|(s, c)| c > s).count();
+    let mut md = format!(
+        "\n### Adaptive against fixed steps at equal error\n\n\
+         Each adaptive run above, set beside the fixed-step runs of the same scheme on the \
+         same scene at the adaptive run's own error: the fixed curve's time and steps there, \
+         by log-log interpolation between the two fixed runs around that error (as in the \
+         large-model table below; runs within the round-off floor, adaptive runs of fewer \
+         than {} steps and adaptive runs outside the fixed curve are left out). This does not \
+         depend on the spacing of the two grids, as the cheapest run of each that reaches a \
+         target would (a decade per adaptive point, a third of one per fixed point). `time`: \
+         adaptive time over fixed time (target ≤ {ADAPTIVE_COST_TARGET}); `steps`: the \
+         adaptive run's accepted steps over the fixed curve's (the controller's placement of \
+         steps; below 1: fewer than uniform steps); `per step`: the two divided, what an \
+         adaptive step costs (its solve, its error estimate, its rejected attempts) over a \
+         fixed step. Medians over the runs compared; times are the sweeps' single medians, \
+         each taken at its own moment, so a single ratio carries this machine's drift \
+         (see the paired table below).\n\n\
+         The median time ratio is at most {ADAPTIVE_COST_TARGET} in {met} of {n} lines \
+         (medians {lo:.2} to {hi:.2}). The steps ratio's medians are {s_lo:.2} to {s_hi:.2} \
+         ({step_bound} of {n} at most 1.1), the per-step ratio's {c_lo:.2} to {c_hi:.2}; \
+         the per-step factor is the larger of the two in {cost_bound} of {n}.\n\n",
+        equal_error::MIN_RUN_STEPS,
+        n = lines.len(),
+    );
+    md.push_str(&markdown(
+        &lines,
+        &[
+            col("scene", |l: &Line| format!("`{}`", l.scene)),
+            col("method", |l: &Line| format!("`{}`", l.method.name())),
+            col("runs (tol)", |l: &Line| {
+                let t = |x: f64| format!("{x:.0e}");
+                let (a, b) = (l.pairs[0].tol, l.pairs[l.pairs.len() - 1].tol);
+                format!("{} ({} → {})", l.pairs.len(), t(a), t(b))
+            }),
+            col("time (median)", |l: &Line| {
+                format!("{:.2}", l.median(|p| p.time))
+            }),
+            col("time (range)", |l: &Line| {
+                let (a, b) = l.time_range();
+                format!("{a:.2}–{b:.2}")
+            }),
+            col("steps (median)", |l: &Line| {
+                format!("{:.2}", l.median(|p| p.steps))
+            }),
+            col("per step (median)", |l: &Line| {
+                format!("{:.2}", l.median(|p| p.per_step()))
+            }),
+        ],
+    ));
+    md
+}
+
+/// Issue 23's target for an adaptive run's time over the fixed curve's at equal error.
+const ADAPTIVE_COST_TARGET: f64 = 1.3;
+
 /// One line of the cheapest-method table: a scene, a target, each method's time and the
 /// external baseline's cheapest run.
 struct Cheapest<'a> {
@@ -683,24 +767,6 @@ fn long_run(lr: &LongRun, fig: &str) -> String {
     md
 }
 
-/// The time a fixed-step curve `(err, seconds)` takes to reach `err`: log-log interpolation
-/// between the two fixed runs around it; `None` outside the curve.
-fn fixed_time_at(fixed: &[&Row], err: f64) -> Option<f64> {
-    let mut pts: Vec<(f64, f64)> = fixed.iter().map(|r| (r.errors()[0], r.seconds)).collect();
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-    pts.windows(2).find_map(|w| {
-        let ((e0, t0), (e1, t1)) = (w[0], w[1]);
-        (e0 <= err && err <= e1 && e0 > 0.0).then(|| {
-            let x = if e1 > e0 {
-                (err / e0).ln() / (e1 / e0).ln()
-            } else {
-                0.0
-            };
-            (t0.ln() + x * (t1.ln() - t0.ln())).exp()
-        })
-    })
-}
-
 fn large_models(summary: &Summary) -> String {
     if summary.large.is_empty() {
         return String::new();
@@ -750,7 +816,7 @@ fn large_models(summary: &Summary) -> String {
             let fixed = summary.rows_in(scene, &method, Mode::Fixed);
             for r in summary.rows_in(scene, &method, Mode::Adaptive) {
                 let err = r.errors()[0];
-                let equal = fixed_time_at(&fixed, err);
+                let equal = equal_error::fixed_at(&fixed, err, |f| f.seconds);
                 md.push_str(&format!(
                     "| `{scene}` | `{}` | {:.0e} | {} | {} | {:.2e} | {} | {} |\n",
                     method.name(),
