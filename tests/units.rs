@@ -807,6 +807,70 @@ mod report_equal_error {
     }
 }
 
+mod report_stiff_cost {
+    use forced_vi_scenes::baselines::Baseline;
+    use forced_vi_scenes::report::stability::*;
+
+    fn adaptive(method: &str, tol: f64, err: f64, seconds: f64) -> Row {
+        Row {
+            scene: "stiff_van_der_pol",
+            method: method.into(),
+            h: 2000.0,
+            tol: Some(tol),
+            outcome: Outcome::Ok,
+            steps_done: 100,
+            max_newton_iters: 3,
+            err_final: err,
+            max_energy_balance_err: 0.0,
+            subdivided_steps: 0,
+            rejected_steps: 0,
+            seconds,
+        }
+    }
+
+    /// The table reads the runs timed again, not the sweeps' times: the sweeps rank
+    /// lobatto3 first, the medians of the rounds lobatto4.
+    #[test]
+    fn the_stiff_table_reads_the_candidates_timed_again() {
+        let bdf = BaselineRow {
+            scene: "stiff_van_der_pol",
+            solver: Baseline::Bdf,
+            tol: 1e-6,
+            err_final: 1e-8,
+            steps: 400,
+            seconds: 5e-4,
+            failure: None,
+        };
+        let s = Summary {
+            adaptive: vec![
+                adaptive("lobatto3", 1e-2, 1e-9, 1e-3),
+                adaptive("lobatto4", 1e-1, 1e-8, 4e-3),
+            ],
+            baselines: vec![bdf],
+            stiff_times: StiffTimes {
+                rounds: 7,
+                adaptive: vec![(0, 2e-3), (1, 4e-4)],
+                baselines: vec![(0, 2e-4)],
+                failure: None,
+            },
+            ..Summary::default()
+        };
+        let md = stiff_cost(&s);
+        let row = md.lines().find(|l| l.starts_with("| 1e-3")).unwrap();
+        assert!(row.contains("`lobatto4` tol 1e-1"), "{row}");
+        assert!(row.contains("400.0 µs") && row.contains("| 2.0 |"), "{row}");
+        assert!(md.contains("timed again"), "{md}");
+        // Without the second timing, the sweeps' times decide.
+        let s = Summary {
+            stiff_times: StiffTimes::default(),
+            ..s
+        };
+        let md = stiff_cost(&s);
+        let row = md.lines().find(|l| l.starts_with("| 1e-3")).unwrap();
+        assert!(row.contains("`lobatto3` tol 1e-2"), "{row}");
+    }
+}
+
 mod report_external {
     use forced_vi_scenes::report::work_precision::external::*;
     use forced_vi_scenes::report::work_precision::Summary;

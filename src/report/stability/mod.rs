@@ -27,7 +27,9 @@
 //!
 //! On the same stiff scenes the stiff baselines ([`Baseline::Bdf`], [`Baseline::Esdirk34`])
 //! run over a ladder of tolerances, and the section compares the cost (wall time) at which
-//! each method reaches a given error.
+//! each method reaches a given error: the cheapest candidates by the sweeps' times are timed
+//! again after the sweeps, one after the other, to their final states alone
+//! ([`StiffTimes`]).
 //!
 //! # The study
 //!
@@ -50,7 +52,8 @@ mod scenes;
 mod section;
 mod tally;
 
-pub use rows::{BaselineRow, Outcome, Row, StabilityRecord, Summary, MAX_SUBDIVISIONS};
+pub use adaptive_section::stiff_cost;
+pub use rows::{BaselineRow, Outcome, Row, StabilityRecord, StiffTimes, Summary, MAX_SUBDIVISIONS};
 pub use scenes::{CHAIN_DOF, OVERDAMPED_ZETA_100, SCENES};
 
 use scenes::{Grid, Planned};
@@ -268,10 +271,13 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
     std::fs::create_dir_all(&opts.out).map_err(ReportError::io(&opts.out))?;
     let records: Vec<StabilityRecord> = rows.iter().chain(&adaptive).map(Into::into).collect();
     write_csv(&opts.out.join("stability.csv"), &records)?;
+    let cases: Vec<&dyn problem::Case> = selected.iter().map(|(c, _)| &**c).collect();
+    let stiff_times = adaptive_section::retime(&adaptive, &baselines, &cases);
     let summary = Summary {
         rows,
         adaptive,
         baselines,
+        stiff_times,
         elapsed: started.elapsed().as_secs_f64(),
     };
     let md = section::markdown_section(&summary, &selected, opts.quick);

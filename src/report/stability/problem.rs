@@ -43,6 +43,11 @@ pub trait Case: Sync {
     /// An adaptive run at `rtol = atol = tol`, first step the whole interval.
     fn adaptive(&self, id: SchemeId, tol: f64) -> Row;
     fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow;
+    /// The wall time of [`Case::adaptive`]'s run to its final state alone: no records, no
+    /// diagnostics, as [`Case::time_baseline`] runs.
+    fn time_adaptive(&self, id: SchemeId, tol: f64) -> Result<f64, String>;
+    /// The wall time of [`Case::baseline`]'s run.
+    fn time_baseline(&self, solver: Baseline, tol: f64) -> Result<f64, String>;
 }
 
 pub(super) fn q_error(q: &[f64], reference: &[f64]) -> f64 {
@@ -189,6 +194,24 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Case for Problem<M, N> {
     }
     fn adaptive(&self, id: SchemeId, tol: f64) -> Row {
         self.run(id, self.t_final, Some(tol))
+    }
+    fn time_adaptive(&self, id: SchemeId, tol: f64) -> Result<f64, String> {
+        let init = InitialState::from_velocity(self.q0, self.v0);
+        let (res, seconds) = timed(|| {
+            let integ = self
+                .integrator(id, self.t_final, Some(tol))
+                .map_err(|e| e.to_string())?;
+            integ
+                .final_state(init, self.t_final)
+                .map_err(|e| e.to_string())
+        });
+        std::hint::black_box(res?);
+        Ok(seconds)
+    }
+    fn time_baseline(&self, solver: Baseline, tol: f64) -> Result<f64, String> {
+        let (res, seconds) = timed(|| self.baseline_q(solver, tol));
+        std::hint::black_box(res?);
+        Ok(seconds)
     }
     fn baseline(&self, solver: Baseline, tol: f64) -> BaselineRow {
         let (res, seconds) = timed(|| self.baseline_q(solver, tol));

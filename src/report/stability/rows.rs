@@ -89,8 +89,26 @@ pub struct Summary {
     pub adaptive: Vec<Row>,
     /// The stiff-baseline runs of the comparison.
     pub baselines: Vec<BaselineRow>,
+    /// The stiff-cost comparison's candidates timed again, one after the other.
+    pub stiff_times: StiffTimes,
     /// Wall time of the whole command, seconds.
     pub elapsed: f64,
+}
+
+/// The candidates of the stiff-cost comparison timed again after the parallel sweeps, in
+/// rounds that run them all one after the other, each to its final state alone (no records
+/// or diagnostics, as the baselines run): indices into [`Summary::adaptive`] and
+/// [`Summary::baselines`] with their median wall times.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StiffTimes {
+    /// Rounds timed.
+    pub rounds: usize,
+    /// Adaptive variational runs: (index, median seconds).
+    pub adaptive: Vec<(usize, f64)>,
+    /// Baseline runs: (index, median seconds).
+    pub baselines: Vec<(usize, f64)>,
+    /// Why the runs could not be timed again (the table then shows the sweeps' times).
+    pub failure: Option<String>,
 }
 
 impl FromStr for Outcome {
