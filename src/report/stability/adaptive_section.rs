@@ -223,7 +223,7 @@ struct StiffCost<'a> {
 
 /// Wall time of the best adaptive variational run over the best stiff baselines' at equal
 /// final error, on stiff van der Pol (μ = 10³, T = 2000): the candidates timed again by
-/// [`retime`], or the sweeps' own times where they could not be.
+/// `retime`, or the sweeps' own times where they could not be.
 pub fn stiff_cost(s: &Summary) -> String {
     let scene = STIFF_COST_SCENE;
     let t = &s.stiff_times;
