@@ -270,30 +270,21 @@ impl Sampler {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> ModelScene<M, N> {
-    /// Runs `integ` on a member to the final time, keeping only the last record.
+    /// Runs `integ` on a member to its final state alone (`Integrator::final_state`: no
+    /// per-step records or diagnostics, as a baseline run returns its final state alone).
     fn run_with(&self, integ: Integrator<'_, M, N>, member: usize) -> Result<Outcome, SceneError> {
         let (q0, v0) = self.start(member)?;
-        let mut last = None;
-        let stats = integ
-            .solve(
-                InitialState::from_velocity(q0, v0),
-                self.t_final,
-                output::each_step(|r| {
-                    last = Some((r.q, r.p, r.energy));
-                }),
-            )
+        let end = integ
+            .final_state(InitialState::from_velocity(q0, v0), self.t_final)
             .map_err(|f| f.error)?;
-        let (q, p, energy) = last.ok_or(forced_vi::Error::InvalidFinalTime {
-            t_final: self.t_final,
-        })?;
         Ok(Outcome {
             end: FinalState {
-                q: q.as_slice().to_vec(),
-                p: p.as_slice().to_vec(),
-                energy,
+                q: end.q.as_slice().to_vec(),
+                p: end.p.as_slice().to_vec(),
+                energy: end.energy,
             },
-            steps: stats.steps,
-            newton_iterations: stats.newton_iterations,
+            steps: end.stats.steps,
+            newton_iterations: end.stats.newton_iterations,
         })
     }
 }

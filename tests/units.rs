@@ -804,6 +804,13 @@ mod report_equal_error {
         let n = fixed_at(&fixed, err(25.0), |r| r.steps as f64).unwrap();
         assert!((n - 25.0).abs() < 1e-9, "{n}");
         assert_eq!(fixed_at(&fixed, err(5.0), |r| r.seconds), None);
+        // The runs timed again: between 20 and 40 steps, halfway in log scale at about 28.3.
+        let (f0, f1, x) = bracket(&fixed, err(800f64.sqrt())).unwrap();
+        assert_eq!((f0.steps, f1.steps), (40, 20));
+        assert!((x - 0.5).abs() < 1e-9, "{x}");
+        // An adaptive run of 2 against fixed runs of 1 and 4 there: the curve gives 2, ratio 1.
+        assert!((ratio_from(&[2.0, 1.0, 4.0], x).unwrap() - 1.0).abs() < 1e-9);
+        assert_eq!(ratio_from(&[2.0, 0.0, 4.0], x), None);
     }
 }
 

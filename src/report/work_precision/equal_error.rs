@@ -13,6 +13,11 @@
 //!   error: how well the controller places its steps (below 1: fewer than uniform steps);
 //! - **per step**: the time ratio over the steps ratio: what an adaptive step costs (its
 //!   solve, its error estimate, its rejected attempts) over a fixed one.
+//!
+//! The sweeps time the fixed and the adaptive runs of a line at different moments, and this
+//! machine's speed drifts by 2× or more between moments, which moves a whole line. So each
+//! line's middle adaptive run and the two fixed runs around its error are also timed again
+//! together ([`middle_runs`], [`Timed`]), and that ratio is the one read against the target.
 
 use super::rows::{Mode, Row, Summary};
 use crate::report::timing::median;
@@ -22,22 +27,82 @@ use crate::report::Method;
 /// is set by the run's length, not by the tolerance (as in the proportionality slope).
 pub const MIN_RUN_STEPS: usize = 4;
 
-/// `value` of a fixed-step curve at the error `err`: log-log interpolation between the two
-/// runs around it (the first such pair, by error); `None` outside the curve.
-pub fn fixed_at(fixed: &[&Row], err: f64, value: impl Fn(&Row) -> f64) -> Option<f64> {
-    let mut pts: Vec<(f64, f64)> = fixed.iter().map(|r| (r.errors()[0], value(r))).collect();
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+/// The two runs of a fixed-step curve around the error `err` (the first such pair, by
+/// error) and the position of `err` between them in log scale (0 at the first, 1 at the
+/// second); `None` outside the curve.
+pub fn bracket<'r>(fixed: &[&'r Row], err: f64) -> Option<(&'r Row, &'r Row, f64)> {
+    let mut pts: Vec<&Row> = fixed.to_vec();
+    pts.sort_by(|a, b| a.errors()[0].total_cmp(&b.errors()[0]));
     pts.windows(2).find_map(|w| {
-        let ((e0, v0), (e1, v1)) = (w[0], w[1]);
-        (e0 <= err && err <= e1 && e0 > 0.0 && v0 > 0.0 && v1 > 0.0).then(|| {
+        let (e0, e1) = (w[0].errors()[0], w[1].errors()[0]);
+        (e0 <= err && err <= e1 && e0 > 0.0).then(|| {
             let x = if e1 > e0 {
                 (err / e0).ln() / (e1 / e0).ln()
             } else {
                 0.0
             };
-            (v0.ln() + x * (v1.ln() - v0.ln())).exp()
+            (w[0], w[1], x)
         })
     })
+}
+
+/// Log-scale interpolation: `v0` at 0, `v1` at 1.
+fn log_between(v0: f64, v1: f64, x: f64) -> f64 {
+    (v0.ln() + x * (v1.ln() - v0.ln())).exp()
+}
+
+/// `value` of a fixed-step curve at the error `err`: log-log interpolation between the two
+/// runs around it ([`bracket`]); `None` outside the curve or where a value is not positive.
+pub fn fixed_at(fixed: &[&Row], err: f64, value: impl Fn(&Row) -> f64) -> Option<f64> {
+    let (r0, r1, x) = bracket(fixed, err)?;
+    let (v0, v1) = (value(r0), value(r1));
+    (v0 > 0.0 && v1 > 0.0).then(|| log_between(v0, v1, x))
+}
+
+/// One line's middle adaptive run and the two fixed runs around its error, timed again
+/// together (see [`super::sweep::time_again`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Timed {
+    /// The scene.
+    pub scene: &'static str,
+    /// The scheme.
+    pub method: Method,
+    /// The adaptive run's tolerance.
+    pub tol: f64,
+    /// Rounds timed.
+    pub rounds: usize,
+    /// The adaptive run's median time over the fixed curve's at its error, or why a run
+    /// failed this time.
+    pub ratio: Result<f64, String>,
+}
+
+/// The runs that [`Timed`] times for a line: its middle adaptive run (by tolerance), the two
+/// fixed runs around that run's error, and where the error lies between them.
+pub fn middle_runs<'r>(
+    summary: &'r Summary,
+    line: &Line,
+    at_floor: impl Fn(f64) -> bool,
+) -> Option<(&'r Row, &'r Row, &'r Row, f64)> {
+    let tol = line.pairs.get(line.pairs.len() / 2)?.tol;
+    let adaptive = summary
+        .rows_in(line.scene, &line.method, Mode::Adaptive)
+        .into_iter()
+        .find(|r| r.h_or_tol == tol)?;
+    let fixed: Vec<&Row> = summary
+        .rows_in(line.scene, &line.method, Mode::Fixed)
+        .into_iter()
+        .filter(|r| !at_floor(r.errors()[0]))
+        .collect();
+    let (f0, f1, x) = bracket(&fixed, adaptive.errors()[0])?;
+    Some((adaptive, f0, f1, x))
+}
+
+/// The time ratio of [`middle_runs`] from their times `[adaptive, f0, f1]`.
+pub fn ratio_from(times: &[f64], x: f64) -> Option<f64> {
+    match times {
+        [a, f0, f1] if *f0 > 0.0 && *f1 > 0.0 => Some(a / log_between(*f0, *f1, x)),
+        _ => None,
+    }
 }
 
 /// One adaptive run beside the fixed curve.

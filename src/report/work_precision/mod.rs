@@ -9,7 +9,8 @@
 //!   the scene's reference; `err_energy`: the absolute energy error there. For the ensemble
 //!   scene these are means over the members (`ensemble.csv` has the min and max too).
 //! - `seconds`: the median wall time of several repeats of the whole run ([`Plan::repeats`](crate::report::plan::Plan::repeats)
-//!   adapts the count to the run time). Ensemble members run in parallel with rayon, and the
+//!   adapts the count to the run time); a variational run computes its final state alone
+//!   (`Integrator::final_state`), as a baseline run does. Ensemble members run in parallel with rayon, and the
 //!   time is the wall time of the whole ensemble; every other run is sequential, one at a time.
 //! - `steps`, `newton_iters`: totals over the run (over all members for the ensemble); for the
 //!   baselines, accepted steps and nonlinear-solver iterations (0 for explicit solvers).
@@ -174,6 +175,28 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
             summary
                 .paired
                 .extend(sweep::paired(*scene, &summary, target, &plan));
+        }
+    }
+    for scene in &selected {
+        let scale = sweep::reference_scale(*scene)[0];
+        let at_floor = |e: f64| crate::report::orders::at_floor(e, scale);
+        for line in equal_error::lines(&summary, scene.name(), at_floor) {
+            let Some((a, f0, f1, x)) = equal_error::middle_runs(&summary, &line, at_floor) else {
+                continue;
+            };
+            let rounds = plan
+                .repeats(a.seconds.max(f0.seconds).max(f1.seconds))
+                .max(plan.max_repeats.min(5));
+            let ratio = sweep::time_again(*scene, &[a, f0, f1], rounds).and_then(|t| {
+                equal_error::ratio_from(&t, x).ok_or_else(|| "no positive time".to_string())
+            });
+            summary.equal_error.push(equal_error::Timed {
+                scene: line.scene,
+                method: line.method,
+                tol: a.h_or_tol,
+                rounds,
+                ratio,
+            });
         }
     }
     sweep::fit_orders(&selected, &mut summary);

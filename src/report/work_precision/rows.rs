@@ -183,6 +183,9 @@ pub struct Summary {
     /// The cheapest variational run against the cheapest baseline per scene and target,
     /// timed again in alternation (see [`super::sweep::paired`]).
     pub paired: Vec<Paired>,
+    /// Each adaptive-against-fixed line's middle run and its fixed curve timed again
+    /// together (see [`super::equal_error`]).
+    pub equal_error: Vec<super::equal_error::Timed>,
 }
 
 /// The cheapest variational run and the cheapest baseline run reaching one error target on

@@ -187,30 +187,8 @@ pub fn paired(scene: &dyn Scene, summary: &Summary, target: f64, plan: &Plan) ->
     let rounds = plan
         .repeats(fastest_vi.seconds.max(fastest_base.seconds))
         .max(plan.max_repeats.min(5));
-    let candidates: Vec<(&Row, Option<Scheme>)> = vis
-        .iter()
-        .chain(&bases)
-        .map(|r| (*r, r.method.scheme()))
-        .collect();
-    let mut samplers: Vec<Box<dyn FnMut() -> Result<f64, String> + '_>> = candidates
-        .iter()
-        .map(|(row, scheme)| {
-            Box::new(move || {
-                let (out, seconds) = timing::timed(|| {
-                    run_members(
-                        scene,
-                        (&row.method, row.mode),
-                        scheme.as_ref(),
-                        row.h_or_tol,
-                    )
-                });
-                out.map(|_| seconds)
-            }) as Box<dyn FnMut() -> Result<f64, String> + '_>
-        })
-        .collect();
-    let mut fs: Vec<&mut dyn FnMut() -> Result<f64, String>> =
-        samplers.iter_mut().map(|f| &mut **f as _).collect();
-    let medians = timing::rotated(rounds, &mut fs);
+    let candidates: Vec<&Row> = vis.iter().chain(&bases).copied().collect();
+    let medians = time_again(scene, &candidates, rounds);
     fn best<'r>(medians: &[f64], rows: &[&'r Row]) -> Option<(&'r Row, f64)> {
         let i = (0..rows.len()).min_by(|&a, &b| medians[a].total_cmp(&medians[b]))?;
         Some((rows[i], medians[i]))
@@ -232,6 +210,32 @@ pub fn paired(scene: &dyn Scene, summary: &Summary, target: f64, plan: &Plan) ->
         rounds,
         candidates: (vis.len(), bases.len()),
     })
+}
+
+/// Times `rows` of `scene` again: [`timing::rotated`] rounds that run them all one after
+/// the other, each round starting one further along; the median of each over the rounds.
+pub fn time_again(scene: &dyn Scene, rows: &[&Row], rounds: usize) -> Result<Vec<f64>, String> {
+    let candidates: Vec<(&Row, Option<Scheme>)> =
+        rows.iter().map(|r| (*r, r.method.scheme())).collect();
+    let mut samplers: Vec<Box<dyn FnMut() -> Result<f64, String> + '_>> = candidates
+        .iter()
+        .map(|(row, scheme)| {
+            Box::new(move || {
+                let (out, seconds) = timing::timed(|| {
+                    run_members(
+                        scene,
+                        (&row.method, row.mode),
+                        scheme.as_ref(),
+                        row.h_or_tol,
+                    )
+                });
+                out.map(|_| seconds)
+            }) as Box<dyn FnMut() -> Result<f64, String> + '_>
+        })
+        .collect();
+    let mut fs: Vec<&mut dyn FnMut() -> Result<f64, String>> =
+        samplers.iter_mut().map(|f| &mut **f as _).collect();
+    timing::rotated(rounds, &mut fs)
 }
 
 /// How many of the cheapest runs of each side [`paired`] times again.
