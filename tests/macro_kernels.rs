@@ -338,3 +338,108 @@ fn check_parameters_names_the_first_bad_field() {
     m.lambda = f64::INFINITY;
     assert_eq!(m.check_parameters(), Err("rho"));
 }
+
+/// A driven model with `t` everywhere it can be: in polynomial and non-polynomial terms of
+/// `L` (with and without velocities, so the mass matrix varies in time), and in force rows
+/// that are polynomial in `(q, v)` or not.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = (1.0 + 0.3 * (w * t).sin()) * x_dot * x_dot / 2 + y_dot * y_dot / 2
+        - k * x * x / 2 - k * y * y / 2 + x * y * t
+        + a * x.sin() * y_dot * (w * t).cos() - (y / 3.0).exp(),
+    force(x = -c * x_dot + a * (w * t).cos(), y = -c * y_dot * (1.0 + x * x) + t * x),
+)]
+struct DrivenPair {
+    k: f64,
+    c: f64,
+    a: f64,
+    w: f64,
+}
+
+/// A const-generic driven chain (its kernels go over whole arrays).
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| q_dot[i] * q_dot[i] / 2 - k * q[i] * q[i] / 2
+        + a * q[i] * (w * t).sin()).sum(),
+    force(q[i] = -c * q_dot[i] + a * (w * t + q[i]).cos()),
+)]
+struct DrivenChain<const N: usize> {
+    k: f64,
+    c: f64,
+    a: f64,
+    w: f64,
+}
+
+/// The driven kernels at random times and states against the general path there.
+fn check_driven<M: ForcedLagrangian<N>, const N: usize>(what: &str, m: &M) {
+    assert!(M::STRUCTURE.uses_time, "{what}");
+    let mut rng = Lcg(7);
+    for _ in 0..200 {
+        let t = 5.0 * rng.next();
+        let (q, v) = (rng.vec::<N>(1.5, 0.0), rng.vec::<N>(2.0, 0.0));
+        let (k, g) = (
+            m.node_jacobian_at(t, &q, &v),
+            general::node_jacobian_at(m, t, &q, &v),
+        );
+        assert_blocks_close(&format!("{what} at t = {t}"), &k, &g, 1e-12);
+        let (kg, gg) = (
+            m.node_gradient_at(t, &q, &v),
+            general::node_gradient_at(m, t, &q, &v),
+        );
+        for (x, y) in kg
+            .fq
+            .iter()
+            .chain(kg.lv.iter())
+            .zip(gg.fq.iter().chain(gg.lv.iter()))
+        {
+            assert!(
+                close(*x, *y, 1e-12),
+                "{what}: gradient at t = {t}: {x:e} {y:e}"
+            );
+        }
+        let e = m.mass_matrix_at(t, &q, &v);
+        for (x, y) in e.iter().zip(g.e.iter()) {
+            assert!(
+                close(*x, *y, 1e-12),
+                "{what}: mass matrix at t = {t}: {x:e} {y:e}"
+            );
+        }
+        // The autonomous kernels are those at t = 0.
+        let (k0, g0) = (
+            m.node_jacobian(&q, &v),
+            general::node_jacobian_at(m, 0.0, &q, &v),
+        );
+        assert_blocks_close(&format!("{what} at t = 0"), &k0, &g0, 1e-12);
+    }
+}
+
+#[test]
+fn driven_kernels_match_the_general_path_at_the_time() {
+    check_driven(
+        "DrivenPair",
+        &DrivenPair {
+            k: 2.0,
+            c: 0.3,
+            a: 0.7,
+            w: 1.3,
+        },
+    );
+    let s = <DrivenPair as ForcedLagrangian<2>>::STRUCTURE;
+    assert!(!s.constant_mass && s.force_uses_velocity);
+    let chain = DrivenChain::<3> {
+        k: 1.0,
+        c: 0.2,
+        a: 0.5,
+        w: 2.0,
+    };
+    check_driven("DrivenChain<3>", &chain);
+    check_driven(
+        "DrivenChain<9>",
+        &DrivenChain::<9> {
+            k: 1.0,
+            c: 0.2,
+            a: 0.5,
+            w: 2.0,
+        },
+    );
+}

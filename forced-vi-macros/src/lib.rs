@@ -190,7 +190,7 @@ mod tests {
 
     #[test]
     fn a_model_that_names_t_is_driven() {
-        // `t` in the force: `_at` methods, `uses_time`, the runtime's general kernels.
+        // `t` in the force: `_at` methods, `uses_time`, specialised kernels at the time.
         let out = expand(quote!(
             coordinates(x),
             lagrangian = x_dot * x_dot / 2 - k * x * x / 2,
@@ -199,7 +199,8 @@ mod tests {
         assert!(!out.contains("compile_error"), "{out}");
         assert!(out.contains("uses_time : true"));
         assert!(out.contains("fn force_at") && out.contains("fn lagrangian_at"));
-        assert!(!out.contains("fn node_gradient") && !out.contains("KERNEL_STACK_BYTES"));
+        assert!(out.contains("fn node_gradient_at") && out.contains("fn node_jacobian_at"));
+        assert!(out.contains("fn mass_matrix_at") && out.contains("KERNEL_STACK_BYTES"));
         // The mass matrix stays constant when only the potential depends on t.
         assert!(out.contains("constant_mass : true"));
         // Without t: today's code.

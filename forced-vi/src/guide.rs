@@ -272,8 +272,10 @@
 //! The Lagrangian and the force may use `t`, the time, so no coordinate or parameter may be
 //! called `t`. Such a model gets [`ForcedLagrangian::lagrangian_at`] and
 //! [`ForcedLagrangian::force_at`] (its `lagrangian` and `force` are the values at `t = 0`)
-//! and `STRUCTURE.uses_time`; the energy balance becomes `E − E0 − W + ∫ ∂L/∂t`. A model
-//! without `t` pays nothing for the feature.
+//! and `STRUCTURE.uses_time`; the energy balance becomes `E − E0 − W + ∫ ∂L/∂t`. Its
+//! specialised kernels take the node's time ([`ForcedLagrangian::node_gradient_at`],
+//! [`ForcedLagrangian::node_jacobian_at`]). A model without `t` pays nothing for the
+//! feature.
 //!
 //! ```
 //! use forced_vi::prelude::*;
@@ -309,7 +311,8 @@
 //!
 //! A model written by hand (without the attribute) overrides `lagrangian_at`/`force_at`
 //! and sets `uses_time` in its `STRUCTURE` ([`Structure::GENERAL_DRIVEN`]); the integrator
-//! checks the flag on the first step.
+//! checks the flag on the first step. It takes the general dual-number kernels of
+//! [`crate::model::general`].
 //!
 //! # Constraints
 //!

@@ -49,6 +49,16 @@ pub(super) fn kernels(c: &Checked) -> (TokenStream, Vec<TokenStream>) {
         g: format_ident!("__fvi_g"),
         j: format_ident!("__fvi_j"),
         params: param_bindings(&c.env),
+        time_f64: if c.uses_time {
+            quote!(__fvi_t,)
+        } else {
+            TokenStream::new()
+        },
+        time_dual: if c.uses_time {
+            quote!(::core::convert::From::from(__fvi_t),)
+        } else {
+            TokenStream::new()
+        },
         stack,
         grad_code: TokenStream::new(),
         jac_code: TokenStream::new(),
@@ -84,6 +94,11 @@ struct Kernels<'c, 'm> {
     j: Ident,
     /// The parameters as `f64` locals.
     params: TokenStream,
+    /// A driven model's time argument, leading the arguments of a call of its helpers and
+    /// its `force_at`: as the kernels' `f64` (`time_f64`) and as the dual number of the
+    /// call (`time_dual`); both empty for an autonomous model.
+    time_f64: TokenStream,
+    time_dual: TokenStream,
     stack: Vec<TokenStream>,
     grad_code: TokenStream,
     jac_code: TokenStream,
@@ -160,7 +175,8 @@ impl Kernels<'_, '_> {
     /// The non-polynomial term `t` of `L` (helper `__fvi_l{k}`).
     fn dual_term(&mut self, k: usize, t: &Term) {
         let name = format_ident!("__fvi_l{}", k);
-        let call = quote!(|__fvi_a, __fvi_b| self.#name(__fvi_a, __fvi_b));
+        let time = &self.time_dual;
+        let call = quote!(|__fvi_a, __fvi_b| self.#name(#time __fvi_a, __fvi_b));
         let set = slot_set(self.c, &t.lowered.uses);
         let values = lit(token_count(&t.lowered.tokens)
             .saturating_mul(4)
@@ -252,9 +268,10 @@ impl Kernels<'_, '_> {
 
     /// The force: its value in the gradient, its derivatives in the Jacobian.
     fn force(&mut self, force: &CheckedForce) {
-        let (fvi, n, q, v, g) = (&self.fvi, &self.c.n, &self.q, &self.v, &self.g);
+        let (n, g) = (&self.c.n, &self.g);
+        let value = self.force_value();
         self.grad_code.extend(quote! {
-            let __fvi_f: [f64; #n] = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &#q, &#v);
+            let __fvi_f: [f64; #n] = #value;
             for __fvi_k in 0..#n {
                 #g.fq[__fvi_k] += __fvi_f[__fvi_k];
             }
@@ -271,6 +288,17 @@ impl Kernels<'_, '_> {
                 }
             }
             Len::Param(_) => self.force_whole(force),
+        }
+    }
+
+    /// The force's value at the node as `[f64; N]` (at the kernel's time for a driven
+    /// model).
+    fn force_value(&self) -> TokenStream {
+        let (fvi, n, q, v) = (&self.fvi, &self.c.n, &self.q, &self.v);
+        if self.c.uses_time {
+            quote!(<Self as #fvi::ForcedLagrangian<#n>>::force_at::<f64>(self, __fvi_t, &#q, &#v))
+        } else {
+            quote!(<Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &#q, &#v))
         }
     }
 
@@ -294,12 +322,13 @@ impl Kernels<'_, '_> {
             quote!(, #i)
         });
         let row = lit(r.row);
+        let (tf, td) = (&self.time_f64, &self.time_dual);
         if let Some(p) = &r.poly {
             if p.is_zero() {
                 return;
             }
             self.jac_code
-                .extend(quote!(#j.grad.fq[#row] += self.#name::<f64>(&#q, &#v #index);));
+                .extend(quote!(#j.grad.fq[#row] += self.#name::<f64>(#tf &#q, &#v #index);));
             let used: BTreeSet<usize> = p
                 .monomials()
                 .flat_map(|m| m.iter().map(|&(s, _)| s))
@@ -317,7 +346,7 @@ impl Kernels<'_, '_> {
         let sl: Vec<Literal> = slots(&c.env, nn, &r.uses).into_iter().map(lit).collect();
         if sl.is_empty() {
             self.jac_code
-                .extend(quote!(#j.grad.fq[#row] += self.#name::<f64>(&#q, &#v #index);));
+                .extend(quote!(#j.grad.fq[#row] += self.#name::<f64>(#tf &#q, &#v #index);));
         } else {
             let kk = lit(sl.len());
             let values = lit(token_count(
@@ -333,7 +362,7 @@ impl Kernels<'_, '_> {
                 .push(quote!(#fvi::kernel_stack_bytes::<#nd::DualSVec64<#kk>, #n>(#values)));
             self.jac_code.extend(quote! {
                 #fvi::force_row(&#q, &#v, &[#(#sl),*], #row,
-                    |__fvi_a, __fvi_b| self.#name(__fvi_a, __fvi_b #index), &mut #j);
+                    |__fvi_a, __fvi_b| self.#name(#td __fvi_a, __fvi_b #index), &mut #j);
             });
         }
     }
@@ -351,7 +380,12 @@ impl Kernels<'_, '_> {
             .saturating_add(64));
         self.stack
             .push(quote!(#fvi::kernel_stack_bytes::<#nd::DualSVec64<#n>, #n>(#values)));
-        let call = quote!(|__fvi_a, __fvi_b| <Self as #fvi::ForcedLagrangian<#n>>::force(self, __fvi_a, __fvi_b));
+        let call = if self.c.uses_time {
+            quote!(|__fvi_a, __fvi_b| <Self as #fvi::ForcedLagrangian<#n>>::force_at(self, ::core::convert::From::from(__fvi_t), __fvi_a, __fvi_b))
+        } else {
+            quote!(|__fvi_a, __fvi_b| <Self as #fvi::ForcedLagrangian<#n>>::force(self, __fvi_a, __fvi_b))
+        };
+        let value = self.force_value();
         if force.uses_q {
             self.jac_code
                 .extend(quote!(#fvi::force_jacobian_q(&#q, &#v, true, #call, &mut #j);));
@@ -363,7 +397,7 @@ impl Kernels<'_, '_> {
         }
         if !force.uses_q && !force.uses_v {
             self.jac_code.extend(quote! {
-                let __fvi_f: [f64; #n] = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &#q, &#v);
+                let __fvi_f: [f64; #n] = #value;
                 for __fvi_k in 0..#n {
                     #j.grad.fq[__fvi_k] += __fvi_f[__fvi_k];
                 }
@@ -401,30 +435,67 @@ impl Kernels<'_, '_> {
             }
         };
         let (mut_g, mut_j, mut_m) = (mutable(grad_code), mutable(jac_code), mutable(mass_code));
-        let code = quote_spanned! {Span::call_site()=>
-            #[inline]
-            fn node_gradient(#sig_args) -> #fvi::NodeGradient<#n> {
-                #prologue
-                let #mut_g #g = #fvi::zero_gradient::<#n>();
-                #g_unused
-                #grad_code
-                #g
+        let grad_body = quote! {
+            #prologue
+            let #mut_g #g = #fvi::zero_gradient::<#n>();
+            #g_unused
+            #grad_code
+            #g
+        };
+        let jac_body = quote! {
+            #prologue
+            let #mut_j #j = #fvi::zero_jacobian::<#n>();
+            #j_unused
+            #jac_code
+            #j
+        };
+        let mass_body = quote! {
+            #prologue
+            let #mut_m #j = #fvi::zero_jacobian::<#n>();
+            #m_unused
+            #mass_code
+            #j.e
+        };
+        let code = if self.c.uses_time {
+            // A driven model: the kernels at the time `t` (`_at`), and the autonomous ones
+            // at `t = 0`, as its `lagrangian` and `force` are.
+            let sig_at = quote!(&self, __fvi_t: f64, #qs: &#fvi::SVector<f64, #n>, #vs: &#fvi::SVector<f64, #n>);
+            let at = |name: &str| {
+                let f = format_ident!("{}_at", name);
+                quote!(<Self as #fvi::ForcedLagrangian<#n>>::#f(self, 0.0, #qs, #vs))
+            };
+            let (g0, j0, m0) = (at("node_gradient"), at("node_jacobian"), at("mass_matrix"));
+            quote_spanned! {Span::call_site()=>
+                #[inline]
+                fn node_gradient_at(#sig_at) -> #fvi::NodeGradient<#n> {
+                    let _ = __fvi_t;
+                    #grad_body
+                }
+                #[inline]
+                fn node_jacobian_at(#sig_at) -> #fvi::NodeJacobian<#n> {
+                    let _ = __fvi_t;
+                    #jac_body
+                }
+                #[inline]
+                fn mass_matrix_at(#sig_at) -> #fvi::SMatrix<f64, #n, #n> {
+                    let _ = __fvi_t;
+                    #mass_body
+                }
+                #[inline]
+                fn node_gradient(#sig_args) -> #fvi::NodeGradient<#n> { #g0 }
+                #[inline]
+                fn node_jacobian(#sig_args) -> #fvi::NodeJacobian<#n> { #j0 }
+                #[inline]
+                fn mass_matrix(#sig_args) -> #fvi::SMatrix<f64, #n, #n> { #m0 }
             }
-            #[inline]
-            fn node_jacobian(#sig_args) -> #fvi::NodeJacobian<#n> {
-                #prologue
-                let #mut_j #j = #fvi::zero_jacobian::<#n>();
-                #j_unused
-                #jac_code
-                #j
-            }
-            #[inline]
-            fn mass_matrix(#sig_args) -> #fvi::SMatrix<f64, #n, #n> {
-                #prologue
-                let #mut_m #j = #fvi::zero_jacobian::<#n>();
-                #m_unused
-                #mass_code
-                #j.e
+        } else {
+            quote_spanned! {Span::call_site()=>
+                #[inline]
+                fn node_gradient(#sig_args) -> #fvi::NodeGradient<#n> { #grad_body }
+                #[inline]
+                fn node_jacobian(#sig_args) -> #fvi::NodeJacobian<#n> { #jac_body }
+                #[inline]
+                fn mass_matrix(#sig_args) -> #fvi::SMatrix<f64, #n, #n> { #mass_body }
             }
         };
         (code, self.stack)

@@ -5,8 +5,9 @@
 //!   `coordinate_names`, `check_parameters`, and the specialised kernels `node_gradient`,
 //!   `node_jacobian` and `mass_matrix`;
 //! - for a driven model (one that names `t`): `lagrangian_at` and `force_at` instead, with
-//!   `lagrangian`/`force` their values at `t = 0`, `STRUCTURE.uses_time`, and no
-//!   specialised kernels (the runtime's general ones take the time);
+//!   `lagrangian`/`force` their values at `t = 0`, `STRUCTURE.uses_time`, and the
+//!   specialised kernels at the node's time (`node_gradient_at`, `node_jacobian_at`,
+//!   `mass_matrix_at`; the autonomous ones are those at `t = 0`);
 //! - an inherent `doubled_lagrangian` and one hidden helper per non-polynomial term of `L`
 //!   and per force entry.
 //!
@@ -90,21 +91,20 @@ fn param_bindings(env: &Env) -> TokenStream {
 /// `theta`, the same model checked with its parameters as duals, adds `lagrangian_with` and `force_with` (DESIGN §12).
 pub fn generate(c: &Checked, split: Option<&Split>, theta: Option<&Checked>) -> TokenStream {
     let g = Gen::new(c);
-    let timed = c.uses_time;
     // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
     // also computes its dense blocks through them.
     let through = split.is_some() && crate::sparse::dense_through_split(c);
     let lagrangian = g.lagrangian();
     // Helpers: non-polynomial terms and force entries.
-    let mut helpers = g.term_helpers(timed || through);
+    let mut helpers = g.term_helpers(through);
     let force_method = match &c.force {
         Some(force) => g.force_items(force, &mut helpers),
         None => TokenStream::new(),
     };
-    // A driven model keeps the runtime's general kernels (they take `t`), and their stack
-    // bound; an autonomous one gets the specialised kernels.
+    // Specialised kernels, at the node's time for a driven model; a model whose dense blocks
+    // go through its per-term code keeps the runtime's general kernels.
     let fvi = &g.fvi;
-    let kernels_and_stack = (!timed && !through).then(|| {
+    let kernels_and_stack = (!through).then(|| {
         let (kernels, stack) = kernels::kernels(c);
         let stack_bytes = stack
             .into_iter()
@@ -241,23 +241,25 @@ impl<'c, 'm> Gen<'c, 'm> {
         }
     }
 
-    /// One hidden helper per non-polynomial term of `L`, unless `general`: a driven model
-    /// uses the runtime's general kernels, which call no term helper; nor do kernels that go
-    /// through the per-term code.
+    /// One hidden helper per non-polynomial term of `L` (taking the time first for a driven
+    /// model), unless `general`: kernels that go through the per-term code call none.
     fn term_helpers(&self, general: bool) -> TokenStream {
         let c = self.c;
         let (n, d, scalar_bound, dq, dv) = (&c.n, &self.d, &self.scalar_bound, &self.dq, &self.dv);
+        let time_param = &self.time_param;
         let mut helpers = TokenStream::new();
         let dual_terms: &[crate::check::Term] = if general { &[] } else { &c.dual_terms };
         for (k, t) in dual_terms.iter().enumerate() {
             let name = format_ident!("__fvi_l{}", k);
             let bind = self.bindings(&t.lowered.names);
+            let t_bind = c.uses_time.then(|| self.time_binding(&t.lowered.names));
             let body = lowered_dual(&t.lowered);
             helpers.extend(quote! {
                 #[doc(hidden)]
                 #[inline(always)]
                 #[allow(unused_braces, unused_parens)]
-                fn #name<#d: #scalar_bound>(&self, #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                fn #name<#d: #scalar_bound>(&self, #time_param #dq: &[#d; #n], #dv: &[#d; #n]) -> #d {
+                    #t_bind
                     #bind
                     #body
                 }
