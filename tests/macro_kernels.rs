@@ -356,6 +356,21 @@ struct DrivenPair {
     w: f64,
 }
 
+/// A driven model whose force has a row without `t` (polynomial: written out at compile
+/// time) beside one with it, and `t` only in the potential.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = x_dot * x_dot / 2 + y_dot * y_dot / 2 + x * y_dot - k * (x * x + y * y) / 2
+        + a * x * y * (w * t).sin(),
+    force(x = -c * x_dot + x * y, y = a * (w * t).cos()),
+)]
+struct DrivenRows {
+    k: f64,
+    c: f64,
+    a: f64,
+    w: f64,
+}
+
 /// A const-generic driven chain (its kernels go over whole arrays).
 #[forced_lagrangian(
     coordinates(q: [f64; N]),
@@ -426,6 +441,18 @@ fn driven_kernels_match_the_general_path_at_the_time() {
     );
     let s = <DrivenPair as ForcedLagrangian<2>>::STRUCTURE;
     assert!(!s.constant_mass && s.force_uses_velocity);
+    check_driven(
+        "DrivenRows",
+        &DrivenRows {
+            k: 1.5,
+            c: 0.4,
+            a: 0.9,
+            w: 0.7,
+        },
+    );
+    // `x * y_dot` makes `C = ∂²L/∂v∂q` nonzero: no constant-mass claim.
+    let s = <DrivenRows as ForcedLagrangian<2>>::STRUCTURE;
+    assert!(!s.constant_mass && s.force_uses_velocity && s.uses_time);
     let chain = DrivenChain::<3> {
         k: 1.0,
         c: 0.2,
