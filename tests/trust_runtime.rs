@@ -901,3 +901,99 @@ fn trust_false_mass_and_velocity_flags_are_refused() {
         }
     }
 }
+
+// ---- Adaptive runs end: a pace that cannot reach the end under the step cap stops. ----
+
+/// `L = ½v² − ½q²`, `F = v³`: from `v = 2` the velocity blows up near `t = 0.125`.
+struct CubicPush;
+
+impl ForcedLagrangian<1> for CubicPush {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (v[0] * v[0] - q[0] * q[0]) * 0.5
+    }
+    fn force<D: Scalar>(&self, _q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [v[0] * v[0] * v[0]]
+    }
+}
+
+/// Into a finite-time singularity, the control per unit step shrinks the steps towards the
+/// singularity without reaching the floor `16 ε t` for billions of steps: midpoint and
+/// lobatto2 took 3.4·10⁷ steps in 21 s and were still going (the step cap, 10⁹, would have
+/// ended them after about 10 minutes). The run now ends in a typed error once its steps have
+/// shrunk window after window to a pace that cannot reach `t_final` under the cap, and
+/// keeps its steps.
+#[test]
+fn trust_an_adaptive_run_into_a_singularity_ends_in_a_typed_error() {
+    let init = InitialState::from_velocity([0.0], [2.0]);
+    let tol = 1e-8;
+    for sch in [
+        Scheme::midpoint(),
+        Scheme::lobatto(2).unwrap(),
+        Scheme::lobatto(3).unwrap(),
+        Scheme::lobatto(5).unwrap(),
+    ] {
+        let id = sch.id();
+        let f = Integrator::adaptive(&CubicPush, sch.clone(), tol, tol)
+            .unwrap()
+            .final_state(init, 5.0)
+            .expect_err("a run into a singularity");
+        let t = match f.error {
+            Error::PaceTooSlow { t, h, needed, left } => {
+                assert!(
+                    needed > left as f64 && h > 0.0,
+                    "{id:?} {tol:e}: {}",
+                    f.error
+                );
+                t
+            }
+            Error::StepSizeTooSmall { t, .. } => t,
+            ref e => panic!("{id:?} tol {tol:e}: {e}"),
+        };
+        assert!(
+            (0.12..0.13).contains(&t),
+            "{id:?} tol {tol:e}: stopped at {t}"
+        );
+        // Bounded: 32 slow windows and the few before. The last step is kept (a final-state
+        // run keeps no records: 2.5·10⁶ of them would take 0.4 GB).
+        assert!(f.stats.steps < 4_000_000, "{id:?}: {} steps", f.stats.steps);
+        let last = f.last.as_ref().expect("the last step");
+        assert_eq!((last.step, last.t), (f.stats.steps, t));
+        assert!(last.q[0].is_finite() && last.p[0].is_finite());
+    }
+}
+
+/// The pace rule never stops a run that fits under its cap: a run of about 2·10⁵ steps
+/// (three windows) ends `Ok` within its tolerance under a cap an eighth above its steps,
+/// and under half its steps it ends in a typed error that keeps them.
+#[test]
+fn trust_the_pace_rule_spares_runs_that_fit_under_the_cap() {
+    let c = 0.1;
+    let model = Damped { c };
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    let (tol, t_final) = (1e-11, 2.0);
+    let integ = Integrator::adaptive(&model, Scheme::lobatto(2).unwrap(), tol, tol).unwrap();
+    let free = integ.final_state(init, t_final).unwrap();
+    let steps = free.stats.steps;
+    assert!(steps > 3 * 65536, "{steps} steps: fewer than three windows");
+    let capped = integ
+        .clone()
+        .max_steps(steps + steps / 8)
+        .final_state(init, t_final)
+        .unwrap_or_else(|f| panic!("{steps} steps, cap {}: {}", steps + steps / 8, f.error));
+    assert_eq!(capped.stats.steps, steps);
+    assert!((capped.q[0] - damped_exact(c, t_final)).abs() <= 10.0 * tol);
+    let short = integ
+        .max_steps(steps / 2)
+        .solve(init, t_final, output::Records)
+        .expect_err("a cap of half the steps");
+    assert!(
+        matches!(
+            short.error,
+            Error::PaceTooSlow { .. } | Error::MaxStepsReached { .. }
+        ),
+        "{}",
+        short.error
+    );
+    assert_eq!(short.trajectory.records.len(), short.stats.steps + 1);
+    assert!(short.stats.steps <= steps / 2);
+}

@@ -138,6 +138,30 @@
 //! without `U`, tol 1e-14 ended `Ok` at 25 times the tolerance; with `U` the run at 1e-13
 //! stops after 3982 steps, and at 1e-12 it ends `Ok` as above.
 
+//! **The pace of a run.** The control per unit step gives a step the budget `tol · h / T`,
+//! so into a finite-time singularity of the model (a velocity that blows up) the steps
+//! shrink like a power of the time left, and reach the floor `16 ε t` only after billions
+//! of steps: with `F = v³` from `v = 2` (`tests/trust_runtime.rs`), midpoint and lobatto2
+//! at tol 1e-8 had taken 3.4·10⁷ steps of about 6e-14 after 21 s, about 2·10⁻⁶ before
+//! the singularity, and the step cap (10⁹) would have ended them after some ten minutes. So an
+//! adaptive run keeps the largest step it accepts in each window of 65536 steps. At a
+//! window's end it compares the steps the rest of the run would take at that step,
+//! `(T − t) / h_max`, with the steps its cap leaves
+//! ([`StepOptions::max_steps`](crate::StepOptions::max_steps) minus the steps taken); a
+//! window is *slow* when they are more and its `h_max` is below the last window's. After
+//! 32 slow windows in a row the run stops with [`Error::PaceTooSlow`] before its next step,
+//! keeping the steps before it: there after 2.5·10⁶ steps (midpoint and lobatto2, 2.5 s);
+//! lobatto3 and lobatto5 reach the floor first.
+//!
+//! Not one slow window but many, each smaller than the last: a stiff run's steps shrink as
+//! far inside a fast transient, and then grow again. On the stiff van der Pol (μ = 10³,
+//! T = 2000, lobatto2 at tol 1e-4, 1.5·10⁷ steps in all) the first relaxation jump took
+//! 48 windows in a row whose steps could not have finished the run under the cap, with
+//! steps down to 3.5e-10; but their `h_max` fell for at most 7 windows in a row before it
+//! rose again, while into the singularity it falls in every window (by 10–30 % each). A
+//! single slow window stopped six of the stability report's adaptive runs of that scene
+//! (lobatto2 and midpoint) that end within their tolerance. A larger cap lets a run go on.
+//!
 //! **The controller.** A PI controller (Gustafsson; Hairer & Wanner, IV.2) on
 //! `‖e‖ ∝ h^p` (per unit step): `h_new = h · clamp(0.9 ‖e‖^{−0.7/p} ‖e_prev‖^{0.4/p}, 0.2,
 //! 5)`, with no growth right after a rejection, within

@@ -206,6 +206,24 @@ pub enum Error {
         /// The cap.
         steps: usize,
     },
+    /// An adaptive run whose steps have shrunk, window after window of 65536 steps, 32
+    /// windows in a row, to where reaching `t_final` at the largest step of the last window
+    /// would take more steps than its cap ([`crate::StepOptions::max_steps`]) leaves: a
+    /// finite-time singularity of the model, most likely (see [`crate::control`], "The pace
+    /// of a run"). The steps before are kept; a larger cap lets such a run go on.
+    #[error(
+        "the steps have shrunk to {h:e} at t = {t}: the rest of the run would take about {needed:.1e} steps, more than the {left} the step cap leaves"
+    )]
+    PaceTooSlow {
+        /// Where the run stopped.
+        t: f64,
+        /// The largest step of the last window.
+        h: f64,
+        /// The steps the rest of the run would take at that step.
+        needed: f64,
+        /// The steps the cap leaves.
+        left: usize,
+    },
     /// Initial data off the constraint manifold of a constrained model (DESIGN §11).
     #[error(
         "the initial {what} violates the constraints: residual {residual:.3e} (at most {tol:.1e}); InitialState::projected makes it consistent"
@@ -354,6 +372,7 @@ impl Error {
             Error::ToleranceBelowRoundOff { .. } => "tolerance_below_round_off".into(),
             Error::InvalidStepBounds { .. } => "invalid_step_bounds".into(),
             Error::MaxStepsReached { .. } => "max_steps_reached".into(),
+            Error::PaceTooSlow { .. } => "pace_too_slow".into(),
             Error::InvalidNewtonOptions { .. } => "invalid_newton_options".into(),
             Error::TooManySteps { .. } => "too_many_steps".into(),
             Error::TooManyRecords { .. } => "too_many_records".into(),

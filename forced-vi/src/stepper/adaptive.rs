@@ -17,6 +17,28 @@ use crate::trajectory::StepRecord;
 /// [`crate::control`]).
 const ROUND_OFF_MAX: f64 = 3.0;
 
+/// The steps of a window over which an adaptive run measures its pace (see
+/// [`crate::control`], "The pace of a run").
+pub(crate) const PACE_WINDOW: usize = 1 << 16;
+
+/// The windows in a row, each with a largest step below the one before and too small for the
+/// rest of the run to fit under the step cap, after which an adaptive run stops.
+pub(crate) const PACE_WINDOWS: u32 = 32;
+// `Error::PaceTooSlow` and `crate::control` name them.
+const _: () = assert!(PACE_WINDOW == 65536 && PACE_WINDOWS == 32);
+
+/// An adaptive run's pace (see [`Stepper::check_pace`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Pace {
+    /// The largest step accepted in the current window, and in the one before.
+    h_max: f64,
+    h_before: f64,
+    /// The slow windows in a row (see [`PACE_WINDOWS`]).
+    slow_windows: u32,
+    /// Set after too many: `(that window's largest step, steps needed, steps left)`.
+    stalled: Option<(f64, f64, usize)>,
+}
+
 /// The part of the tolerance below which the estimate leaves out the second correction of
 /// carried factors (see [`crate::control`]).
 const NEGLIGIBLE: f64 = 0.01;
@@ -74,6 +96,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                     steps: self.options.max_steps,
                 });
             }
+            if let Some((h, needed, left)) = self.pace.stalled {
+                return Err(Error::PaceTooSlow {
+                    t: t0,
+                    h,
+                    needed,
+                    left,
+                });
+            }
             // Per unit step: the local errors of a run add up to about `tol`.
             let per_unit = span / h;
             let solved = self.attempt(h, &mut iters).and_then(|res| {
@@ -129,6 +159,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                             (false, Some(ts)) => ts,
                             (false, None) => t0 + h,
                         };
+                        self.check_pace(h);
                         return self.finish_step(iters, res, 1);
                     }
                     self.h_next = self.controller.reject(h, err);
@@ -144,6 +175,28 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             self.stats.rejected_steps += 1;
             self.state.copy_from(&self.saved);
+        }
+    }
+
+    /// Keeps the largest step of the current window of [`PACE_WINDOW`] steps, with `h` the
+    /// step just accepted; at the window's end, counts the windows in a row whose largest
+    /// step is smaller than the one before and too small for the rest of the run to fit
+    /// under the step cap, and after [`PACE_WINDOWS`] of them marks the run as stalled (see
+    /// [`crate::control`], "The pace of a run"): the next step then ends the run.
+    fn check_pace(&mut self, h: f64) {
+        let pace = &mut self.pace;
+        pace.h_max = pace.h_max.max(h);
+        let steps = self.stats.steps + 1;
+        if steps.is_multiple_of(PACE_WINDOW) {
+            let left = self.options.max_steps.saturating_sub(steps);
+            let needed = (self.t_final - self.t) / pace.h_max;
+            let slow = needed > left as f64 && pace.h_max < pace.h_before;
+            pace.slow_windows = if slow { pace.slow_windows + 1 } else { 0 };
+            if pace.slow_windows >= PACE_WINDOWS {
+                pace.stalled = Some((pace.h_max, needed, left));
+            }
+            pace.h_before = pace.h_max;
+            pace.h_max = 0.0;
         }
     }
 

@@ -210,6 +210,8 @@ pub struct Stepper<'a, M, const N: usize> {
     tolerance: Option<Tolerance<N>>,
     controller: Controller,
     h_next: f64,
+    /// Adaptive runs: the pace of the run (see [`crate::control`], "The pace of a run").
+    pace: adaptive::Pace,
     /// The last accepted step's [`StepRecord::error_estimate`].
     estimate: f64,
     /// Adaptive runs of a model whose factors cost most of a step (see

@@ -129,6 +129,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             tolerance,
             controller: Controller::new(scheme.order()),
             h_next: h.min(options.max_step),
+            pace: Default::default(),
             estimate: 0.0,
             band,
             lean: false,

@@ -58,7 +58,7 @@ pub fn adaptive(s: &Summary, cases: &[&dyn Case]) -> String {
          rtol = atol = tol (`lobatto2` and `midpoint` down to {:.0e} only: below it a stiff run takes 10⁷ steps and more), first step the whole interval (the `h` column), no subdivision \
          (the controller rejects a step whose Newton solve fails and shrinks it). An adaptive \
          run should either finish with err_final ≤ 100·tol or stop with a typed error \
-         (`step_size_too_small`, `max_steps_reached`, …). `wrong` here counts the finished \
+         (`step_size_too_small`, `pace_too_slow`, `max_steps_reached`, …). `wrong` here counts the finished \
          runs with err_final above 100·tol (or above ten times the reference's own error, \
          where that is larger): **{wrong} of {} adaptive runs** (target 0); {gross} of them \
          are off by more than half the solution's size.\n\n",
