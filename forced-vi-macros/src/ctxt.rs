@@ -38,6 +38,13 @@ impl Ctxt {
         !self.errors.borrow().is_empty()
     }
 
+    /// How many errors have been recorded: a rule that reads what an expression uses runs
+    /// only if lowering it added none (an unsupported part lowers to nothing, so what it
+    /// names would be missing).
+    pub fn error_count(&self) -> usize {
+        self.errors.borrow().len()
+    }
+
     /// All recorded errors, combined; `Ok` if there were none.
     pub fn check(self) -> syn::Result<()> {
         let mut errors = self.errors.into_inner().into_iter();

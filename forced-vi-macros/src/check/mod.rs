@@ -116,10 +116,15 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         params_dual,
     };
     let (_, lagrangian) = model.lagrangian.as_ref()?;
+    let before = cx.error_count();
     let mut lower_l = Lowerer::new(cx, &env, "the Lagrangian");
     let lowered = lower_l.expr(lagrangian);
     let l_checked = lower_l.checked_index.get();
-    check_lagrangian_uses_velocity(cx, &env, lagrangian, &lowered);
+    // Only on a Lagrangian lowered whole: an unsupported part records no names, and the
+    // rule would then call a Lagrangian with a kinetic term in that part velocity-free.
+    if cx.error_count() == before {
+        check_lagrangian_uses_velocity(cx, &env, lagrangian, &lowered);
+    }
     let force_fns = model.force.as_ref().map(|f| check_force(cx, &env, f));
     let constraints = check_constraints(cx, &env, model, &n);
     let n = n?;
