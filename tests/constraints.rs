@@ -1275,3 +1275,41 @@ fn constraint_sparse_bad_input_gets_typed_errors() {
         Err(Error::NonFiniteParameter { .. })
     ));
 }
+
+/// `InitialState::projected` names a non-finite input as the user's data, on the dense
+/// path and on the sparse one (a chain with sparse constraint kernels), not as a value the
+/// model returned (it said `NonFiniteModel` at step 0 before).
+#[test]
+fn constraint_projection_names_non_finite_input() {
+    let model = MacroPendulum {
+        m: M,
+        g: G,
+        l: L,
+        c: C,
+    };
+    for (q, v, what, index) in [
+        ([f64::NAN, 0.3], [0.0, 0.0], "q", 0),
+        ([1.0, f64::INFINITY], [0.0, 0.0], "q", 1),
+        ([1.0, 0.0], [0.0, f64::NEG_INFINITY], "v", 1),
+    ] {
+        let err = InitialState::projected(&model, q, v).expect_err("non-finite input");
+        assert!(
+            matches!(err, Error::NonFiniteInitialData { what: w, index: i } if w == what && i == index),
+            "{err}"
+        );
+    }
+    let chain = RigidChain::<16>::default();
+    let mut q = [0.0; 16];
+    q[3] = f64::NAN;
+    let err = InitialState::projected(&chain, q, [0.0; 16]).expect_err("non-finite input");
+    assert!(
+        matches!(
+            err,
+            Error::NonFiniteInitialData {
+                what: "q",
+                index: 3
+            }
+        ),
+        "{err}"
+    );
+}

@@ -288,7 +288,8 @@ impl<const N: usize> InitialState<N> {
     /// `q` moved onto `g(q) = 0` by Gauss–Newton steps of least change
     /// (`q ← q − Gᵀ(GGᵀ)⁻¹ g`), then `v` projected onto `G v + ∂g/∂t = 0` the same way (at
     /// `t = 0`; `∂g/∂t = 0` for constraints that do not read the time). A typed error
-    /// if the constraints are singular at `q` or the projection does not converge.
+    /// if a component of `q` or `v` is not finite ([`Error::NonFiniteInitialData`]), the
+    /// constraints are singular at `q` or the projection does not converge.
     ///
     /// A model whose sparse kernels evaluate its constraints
     /// ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count)) is
@@ -298,6 +299,12 @@ impl<const N: usize> InitialState<N> {
         q: [f64; N],
         v: [f64; N],
     ) -> Result<Self, Error> {
+        // The user's data, named as such (not as a value the model returned).
+        for (what, x) in [("q", &q[..]), ("v", &v[..])] {
+            if let Some(index) = x.iter().position(|c| !c.is_finite()) {
+                return Err(Error::NonFiniteInitialData { what, index });
+            }
+        }
         #[cfg(feature = "sparse")]
         if let Some(node) = model.sparse_node() {
             let m = model.constraint_count();
