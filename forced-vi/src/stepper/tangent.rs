@@ -187,9 +187,17 @@ fn check_parameter_gradient<const N: usize>(g: &NodeGradient<N>, t: f64) -> Resu
     }
 }
 
-/// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx` (`s` blocks of `N`, block 0
-/// the start), with the node blocks of the last [`StepBackend::linearize`]; with `param =
-/// (pnode, k, P)`, plus the terms of a unit change of parameter `θ_k`.
+/// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx_0 = dq`, `dx_m = dq + dZ_m`
+/// given as `dx` (`s` blocks of `N`: block 0 `dq`, block `m ≥ 1` the increment `dZ_m`),
+/// with the node blocks of the last [`StepBackend::linearize`]; with `param = (pnode, k,
+/// P)`, plus the terms of a unit change of parameter `θ_k`.
+///
+/// In increments, as the step's own unknowns: `dx_i = dq + Σ_{m≥1} Φ_im dZ_m` and
+/// `dv_i = (1/h) Σ_{m≥1} Ψ_im dZ_m`, since `Σ_m Φ_im = 1` and `Σ_m Ψ_im = 0`. Summed over
+/// the control points' directions instead, `dv_i` kept the round-off of that zero sum,
+/// `ε |dq| / h`, and the tangent took it into `dp` at every step: on the coupled oscillators
+/// of the tests, 3.6·10⁶ fixed lobatto3 steps ended 3.5e-7 off a reference Jacobian, against
+/// 1e-10 for the adjoint of the same run.
 fn linearized_gradients(
     backend: &dyn StepBackend,
     h: f64,
@@ -202,9 +210,9 @@ fn linearized_gradients(
     let (s, n) = (sch.stages(), dxi.len());
     g.fill(0.0);
     for i in 0..sch.quadrature_nodes() {
-        dxi.fill(0.0);
+        dxi.copy_from_slice(&dx[..n]);
         dvi.fill(0.0);
-        for m in 0..s {
+        for m in 1..s {
             let (phi, psi) = (sch.phi_at(i, m), sch.psi_at(i, m) / h);
             for a in 0..n {
                 dxi[a] += phi * dx[m * n + a];
@@ -238,9 +246,9 @@ fn propagate(backend: &mut dyn StepBackend, tg: &mut Tangent, h: f64, n: usize) 
     let np = tg.theta.len();
     for c in 0..tg.columns(n) {
         let col = c * 2 * n;
-        for m in 0..s {
-            tg.dx[m * n..(m + 1) * n].copy_from_slice(&tg.m[col..col + n]);
-        }
+        // `dq`, then no increments: the right-hand side's directions.
+        tg.dx[..n].copy_from_slice(&tg.m[col..col + n]);
+        tg.dx[n..].fill(0.0);
         let param = (c >= 2 * n).then(|| (&tg.pnode[..], c - 2 * n, np));
         linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
         for j in 0..s - 1 {
@@ -252,12 +260,12 @@ fn propagate(backend: &mut dyn StepBackend, tg: &mut Tangent, h: f64, n: usize) 
         backend.solve_linearized(&mut tg.rhs);
         for m in 1..s {
             for a in 0..n {
-                tg.dx[m * n + a] = tg.m[col + a] + tg.rhs[lay.at(m, a)];
+                tg.dx[m * n + a] = tg.rhs[lay.at(m, a)];
             }
         }
         linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
         for a in 0..n {
-            tg.m[col + a] = tg.dx[(s - 1) * n + a];
+            tg.m[col + a] += tg.dx[(s - 1) * n + a];
             tg.m[col + n + a] = tg.g[(s - 1) * n + a];
         }
     }
