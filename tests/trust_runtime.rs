@@ -997,3 +997,71 @@ fn trust_the_pace_rule_spares_runs_that_fit_under_the_cap() {
     assert_eq!(short.trajectory.records.len(), short.stats.steps + 1);
     assert!(short.stats.steps <= steps / 2);
 }
+
+/// A force that acts only between the times an adaptive run samples: a Gaussian pulse of
+/// width `w` at `tc` on a unit oscillator.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = a * (-((t - tc) / w).powi(2)).exp()),
+)]
+struct Pulse {
+    a: f64,
+    tc: f64,
+    w: f64,
+}
+
+/// The documented limit of error control and its two remedies (README, "What an `Ok`
+/// promises"). Neither a step nor its estimate sees a force that acts only between their
+/// nodes: from x = 1 at rest, with a pulse of width 1e-3 at t = 0.5, adaptive lobatto5 at
+/// tol 1e-8 takes 8 steps to t = 3 and ends `Ok`, the pulse missed (error 1.06). A largest
+/// step of the pulse's width, or an output time at it (a step then ends there and samples
+/// it), keeps every run within the tolerance.
+#[test]
+fn trust_a_pulse_between_the_nodes_needs_max_step_or_an_output_time() {
+    let (tc, t_final) = (0.5, 3.0f64);
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    for w in [1e-3, 1e-4] {
+        let m = Pulse { a: 1.0 / w, tc, w };
+        // x = cos t + J e^(−w²/4) sin(t − tc) after the pulse, J = a w √π its impulse.
+        let kick = std::f64::consts::PI.sqrt() * (-w * w / 4.0).exp();
+        let exact = t_final.cos() + kick * (t_final - tc).sin();
+        for s in [3, 5] {
+            for tol in [1e-4, 1e-8] {
+                let integ = || Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol);
+                let bounded = integ()
+                    .and_then(|i| i.max_step(w))
+                    .unwrap()
+                    .final_state(init, t_final)
+                    .unwrap();
+                let err = (bounded.q[0] - exact).abs();
+                assert!(err <= tol, "w {w} lobatto{s} tol {tol}, max_step: {err:e}");
+                let samples = integ()
+                    .unwrap()
+                    .solve(init, t_final, output::Samples(&[tc, t_final]))
+                    .unwrap();
+                let err = (samples[1].q[0] - exact).abs();
+                assert!(
+                    err <= tol,
+                    "w {w} lobatto{s} tol {tol}, output at tc: {err:e}"
+                );
+            }
+        }
+    }
+    // The unguarded run: if this ever catches the pulse, the README's example is out of date.
+    let m = Pulse {
+        a: 1e3,
+        tc,
+        w: 1e-3,
+    };
+    let end = Integrator::adaptive(&m, Scheme::lobatto(5).unwrap(), 1e-8, 1e-8)
+        .unwrap()
+        .final_state(init, t_final)
+        .unwrap();
+    assert!(
+        (end.q[0] - t_final.cos()).abs() < 1e-6 && end.stats.steps < 20,
+        "the pulse is no longer missed ({} steps, q = {}): update the README",
+        end.stats.steps,
+        end.q[0]
+    );
+}

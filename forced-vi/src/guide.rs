@@ -542,7 +542,13 @@
 //! With tolerances ([`Integrator::tolerances`], [`Integrator::adaptive`],
 //! [`Integrator::auto`], which picks the Lobatto scheme from the tolerance too), every step's
 //! estimated local error per unit step is within them, so the error follows the tolerance
-//! (measured, not proved: an estimate can be fooled).
+//! (measured, not proved: an estimate can be fooled). A step and its estimate see the
+//! forces at their nodes only: a force that acts only between them (a pulse shorter than
+//! the steps, a narrow well crossed fast) can be missed by both, with an `Ok` (measured on
+//! a pulse of width 10⁻³: lobatto5 at tol 1e-8 took 8 steps over it, error 1.06). Bound
+//! the steps below such a feature's width with [`Integrator::max_step`], or put an output
+//! time of [`output::Samples`](crate::output::Samples) on a feature at a known time: a
+//! step then ends on it.
 //!
 //! A fixed-step run does **not** promise that `h` is small enough for the accuracy you
 //! want: the error is `O(h^order)` and `h` is your choice. Watch

@@ -243,7 +243,10 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     }
 
     /// Adaptive runs: the largest step (default `∞`). Fails unless it is positive and at
-    /// least [`StepOptions::min_step`].
+    /// least [`StepOptions::min_step`]. A force that acts only between a step's nodes (a
+    /// pulse shorter than the step) is invisible to the step and to its error estimate:
+    /// bound the steps by such a feature's width (see the
+    /// [guide](crate::guide#what-an-ok-promises)).
     pub fn max_step(mut self, h: f64) -> Result<Self, Error> {
         self.options.max_step = h;
         self.options.check_step_bounds()?;
