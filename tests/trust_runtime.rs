@@ -1065,3 +1065,44 @@ fn trust_a_pulse_between_the_nodes_needs_max_step_or_an_output_time() {
         end.q[0]
     );
 }
+
+/// A steep force: a unit mass crossing a Gaussian bump of width 1e-3 and height 0.4 (with a
+/// weak spring). `|∂F/∂x|` reaches 8·10⁵ on its flanks.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - a * (-((x - xc) / w).powi(2)).exp() - k * x * x,
+)]
+struct Bump {
+    a: f64,
+    xc: f64,
+    w: f64,
+    k: f64,
+}
+
+/// Tight tolerances on a steep force end `Ok` within them: the estimate counts the rounding
+/// that a force carries from its position, `|∂F/∂x| |x| ε` (see `forced_vi::control`, "Steep
+/// forces"). Without it, these runs ended in `StepSizeTooSmall` on the bump's flank, the
+/// steps shrinking from 7e-5 to 1e-14 while the estimate stayed at momenta differing by
+/// 1e-17 to 1e-16. Reference: `scripts/bump_reference.py` (energy quadrature, 40 digits).
+#[test]
+fn trust_a_steep_force_at_a_tight_tolerance_ends_ok() {
+    let m = Bump {
+        a: 0.4,
+        xc: 0.5,
+        w: 1e-3,
+        k: 0.001,
+    };
+    let x_ref = 2.989_534_031_764_425_5;
+    let init = InitialState::from_velocity([0.0], [1.0]);
+    for (s, tol) in [(3, 1e-11), (3, 1e-12), (5, 1e-11), (5, 1e-12)] {
+        let end = Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol)
+            .unwrap()
+            .final_state(init, 3.0)
+            .unwrap_or_else(|f| panic!("lobatto{s} at {tol:e}: {}", f.error));
+        let err = (end.q[0] - x_ref).abs();
+        assert!(
+            err <= tol * (1.0 + x_ref),
+            "lobatto{s} at {tol:e}: error {err:e}"
+        );
+    }
+}

@@ -38,8 +38,9 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     /// error estimate of [`crate::control`]): the Jacobian is assembled from them without
     /// evaluating the node kernels.
     pub(crate) blocks_given: bool,
-    /// `h |A| |x|` at the last Jacobian ([`NonlinearSystem::residual_noise`]).
+    /// `h |A| |x|` at the last Jacobian ([`NonlinearSystem::residual_noise`]), and that `h`.
     pub(crate) noise: f64,
+    pub(crate) noise_h: f64,
     /// The unknowns `xs` and `vs` were last computed from, while `nodes_valid` (cleared
     /// when `h`, `t0` or `q0` change): a Jacobian at the point of the last residual, as
     /// Newton asks for, takes the node values as they are.
@@ -142,6 +143,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 .map(|x| x.as_slice())
                 .chain([self.q0.as_slice()]),
         );
+        self.noise_h = h;
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {

@@ -62,6 +62,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 gjac: vec![DMatrix::zeros(cons, N); s],
                 blocks_given: false,
                 noise: 0.0,
+                noise_h: 0.0,
                 nodes_z: Vec::with_capacity(dim),
                 nodes_valid: false,
             },
@@ -515,6 +516,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         let p = &self.prob;
         (p.h, p.t0, p.q0.as_slice(), p.p0.as_slice())
+    }
+
+    fn force_round_off_rate(&self) -> f64 {
+        crate::newton::force_round_off_rate(self.prob.noise, self.prob.noise_h)
     }
 
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {

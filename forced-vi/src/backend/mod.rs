@@ -204,6 +204,9 @@ pub(crate) trait StepBackend {
     fn end_multipliers(&self) -> &[f64];
     /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
+    /// `max |A| · max |x|` at the nodes of the last Jacobian (`A = ∂(L_q + F)/∂q`): times ε,
+    /// the round-off of the forces there, which their positions' rounding carries.
+    fn force_round_off_rate(&self) -> f64;
     /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
     /// backward pass of an adjoint.
     fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]);
@@ -435,6 +438,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     }
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {
         forward!(self, b => b.step_data())
+    }
+    fn force_round_off_rate(&self) -> f64 {
+        forward!(self, b => b.force_round_off_rate())
     }
     fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]) {
         forward!(self, b => b.restore(h, t0, start, z))

@@ -410,6 +410,10 @@ impl StepBackend for SparseBackend<'_> {
         (p.h, p.t0, &p.q0, &p.p0)
     }
 
+    fn force_round_off_rate(&self) -> f64 {
+        self.prob.force_round_off_rate()
+    }
+
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
         let prob = &mut self.prob;
         prob.h = h;

@@ -71,6 +71,12 @@ pub(crate) fn force_round_off<'a>(
     h * max_abs(a) * max_abs(x)
 }
 
+/// `|A| |x|` from a [`force_round_off`] `noise` taken with the step `h`: the forces'
+/// round-off at the nodes, over ε, per unit step (0 before the first Jacobian).
+pub(crate) fn force_round_off_rate(noise: f64, h: f64) -> f64 {
+    if h > 0.0 { noise / h } else { 0.0 }
+}
+
 /// What a successful solve reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]

@@ -56,8 +56,9 @@ pub(crate) struct SparseStep<'a> {
     pub(crate) cons: Option<StepConstraints>,
     /// Scratch: the multipliers of one control point.
     lam: Vec<f64>,
-    /// `h |A| |x|` at the last Jacobian ([`SparseSystem::residual_noise`]).
+    /// `h |A| |x|` at the last Jacobian ([`SparseSystem::residual_noise`]), and that `h`.
     noise: f64,
+    noise_h: f64,
     /// The model promises a constant mass matrix (`E` the same at every node and step, and
     /// `C ≡ 0`): the `E` part of the Jacobian is assembled once, for a unit step, into
     /// `e_part` (on the first Jacobian, `e_built`; the buffer is made with the others, so
@@ -69,6 +70,11 @@ pub(crate) struct SparseStep<'a> {
 }
 
 impl<'a> SparseStep<'a> {
+    /// `|A| |x|` as of the last Jacobian (see [`crate::newton::force_round_off_rate`]).
+    pub(crate) fn force_round_off_rate(&self) -> f64 {
+        crate::newton::force_round_off_rate(self.noise, self.noise_h)
+    }
+
     /// Buffers for `node` and `scheme` on a recorded pattern; for a constrained model, with
     /// the pattern of `G` (whose curvature entries the node pattern holds).
     pub(crate) fn new(
@@ -103,6 +109,7 @@ impl<'a> SparseStep<'a> {
             cons,
             lam,
             noise: 0.0,
+            noise_h: 0.0,
             e_part: vec![0.0; if constant_mass { values_len } else { 0 }],
             constant_mass,
             e_built: false,
@@ -269,6 +276,7 @@ impl SparseSystem for SparseStep<'_> {
             self.blocks.iter().map(|b| b.a.as_slice()),
             [self.xs.as_slice(), self.q0.as_slice()],
         );
+        self.noise_h = h;
         let base = &self.step_pattern.base;
         let nnz = self.pattern.nnz();
         if self.constant_mass {
