@@ -1106,3 +1106,57 @@ fn trust_a_steep_force_at_a_tight_tolerance_ends_ok() {
         );
     }
 }
+
+/// A stiff damped spring about `x0`: `ẍ = −k (x − x0) − c ẋ`.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * k * (x - x0) * (x - x0),
+    force(x = -c * x_dot),
+)]
+struct StiffSpring {
+    k: f64,
+    x0: f64,
+    c: f64,
+}
+
+/// The same rounding on a stiff spring (`k = 10⁶`, 318 periods): at tol 1e-12 lobatto3
+/// returned `Ok` 52 times the tolerance off the exact solution after 2.7·10⁶ steps, the
+/// estimate having left that noise unseen; it now ends in `ToleranceBelowRoundOff`, the
+/// steps before it kept. At 1e-9 the run is `Ok` within the tolerance.
+#[test]
+fn trust_a_stiff_spring_at_a_tight_tolerance_is_within_it_or_typed() {
+    let m = StiffSpring {
+        k: 1e6,
+        x0: 1.0,
+        c: 0.1,
+    };
+    let t_final = 2.0f64;
+    let wd = (m.k - m.c * m.c / 4.0).sqrt();
+    let exact = m.x0
+        + (-m.c * t_final / 2.0).exp()
+            * ((wd * t_final).cos() + m.c / (2.0 * wd) * (wd * t_final).sin());
+    let init = InitialState::from_velocity([m.x0 + 1.0], [0.0]);
+    for tol in [1e-9, 1e-12] {
+        match Integrator::adaptive(&m, Scheme::lobatto(3).unwrap(), tol, tol)
+            .unwrap()
+            .final_state(init, t_final)
+        {
+            Ok(end) => {
+                let err = (end.q[0] - exact).abs();
+                assert!(
+                    err <= 10.0 * tol * (1.0 + exact.abs()),
+                    "tol {tol:e}: Ok {err:e} off"
+                );
+            }
+            Err(f) => {
+                assert!(tol < 1e-9, "tol {tol:e}: {}", f.error);
+                assert!(
+                    matches!(f.error, Error::ToleranceBelowRoundOff { .. }),
+                    "{}",
+                    f.error
+                );
+                assert!(f.stats.steps > 0);
+            }
+        }
+    }
+}
