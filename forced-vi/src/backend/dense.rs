@@ -519,7 +519,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     }
 
     fn force_round_off_rate(&self) -> f64 {
-        crate::newton::force_round_off_rate(self.prob.noise, self.prob.noise_h)
+        let p = &self.prob;
+        let velocities = crate::newton::force_round_off(
+            1.0,
+            p.jacs.iter().map(|j| j.b.as_slice()),
+            p.vs.iter().map(|v| v.as_slice()),
+        );
+        crate::newton::force_round_off_rate(p.noise, p.noise_h) + velocities
     }
 
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {

@@ -204,8 +204,9 @@ pub(crate) trait StepBackend {
     fn end_multipliers(&self) -> &[f64];
     /// The step of the last [`Self::solve`] (or [`Self::restore`]): `(h, t0, q0, p0)`.
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]);
-    /// `max |A| · max |x|` at the nodes of the last Jacobian (`A = ∂(L_q + F)/∂q`): times ε,
-    /// the round-off of the forces there, which their positions' rounding carries.
+    /// `max |A| · max |x| + max |B| · max |v|` at the nodes of the last Jacobian
+    /// (`A = ∂(L_q + F)/∂q`, `B = ∂(L_q + F)/∂v`): times ε, the round-off of the forces
+    /// there, which the rounding of their positions and velocities carries.
     fn force_round_off_rate(&self) -> f64;
     /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
     /// backward pass of an adjoint.

@@ -70,9 +70,15 @@ pub(crate) struct SparseStep<'a> {
 }
 
 impl<'a> SparseStep<'a> {
-    /// `|A| |x|` as of the last Jacobian (see [`crate::newton::force_round_off_rate`]).
+    /// `|A| |x|` as of the last Jacobian (see [`crate::newton::force_round_off_rate`]), plus
+    /// `|B| |v|` with the node velocities of the last residual.
     pub(crate) fn force_round_off_rate(&self) -> f64 {
-        crate::newton::force_round_off_rate(self.noise, self.noise_h)
+        let velocities = crate::newton::force_round_off(
+            1.0,
+            self.blocks.iter().map(|b| b.b.as_slice()),
+            [self.vs.as_slice()],
+        );
+        crate::newton::force_round_off_rate(self.noise, self.noise_h) + velocities
     }
 
     /// Buffers for `node` and `scheme` on a recorded pattern; for a constrained model, with

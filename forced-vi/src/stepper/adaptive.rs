@@ -458,8 +458,8 @@ fn local_error<const N: usize>(
     };
     // The momenta: `dp` less the reference's `h Σ_i b_i (L_q + F)_i`, less its constraint
     // impulse, and the sizes of the terms (in `eq` until the positions are compared), node
-    // by node. Each force also carries the rounding of the position it is evaluated at,
-    // `|A| |x| ε` (`A = ∂(L_q + F)/∂q`), which its size alone leaves out: where the forces
+    // by node. Each force also carries the rounding of the position and velocity it is
+    // evaluated at, `(|A| |x| + |B| |v|) ε`, which its size alone leaves out: where the forces
     // are steep, that is what the two sums differ by once the step is small (see
     // `crate::control`, "Steep forces").
     let (b, rs) = (view.scheme.b(), view_r.scheme);
