@@ -1085,12 +1085,14 @@ struct Bump {
 /// steps shrinking from 7e-5 to 1e-14 while the estimate stayed at momenta differing by
 /// 1e-17 to 1e-16. Reference: `scripts/bump_reference.py` (energy quadrature, 40 digits).
 ///
-/// Each run also goes with its steps capped at the bump's width (`max_step`, the documented
-/// remedy for a feature narrower than the steps), which holds whatever the step sequence:
-/// uncapped, a run sees the bump only if a node lands on it (a change of the controller that
-/// was tried made lobatto5 at 1e-12 step over it, `Ok` 1.5e-3 off; the uncapped runs here
-/// measure the code as it is). Capped, the old estimate also ended all four runs in
-/// `StepSizeTooSmall` (checked on fe96ce9).
+/// The steps are capped at the bump's width (`max_step`, the documented remedy for a feature
+/// narrower than the steps the smooth motion allows; see
+/// `trust_a_pulse_between_the_nodes_needs_max_step_or_an_output_time`). Uncapped, a run sees
+/// the bump only if a node lands on it, which depends on the step sequence alone: with the
+/// controller of b90ffc4, lobatto3 and lobatto5 at 1e-11 and 1e-12 happened to see it (a
+/// rejected attempt had a node on it), while lobatto4 at 1e-10, 1e-11 and 1e-12 and lobatto3
+/// at 1e-10 stepped over it and ended `Ok` 1.5e-3 off. Capped, the old estimate ended the
+/// lobatto3 and lobatto5 runs in `StepSizeTooSmall` (checked on fe96ce9).
 #[test]
 fn trust_a_steep_force_at_a_tight_tolerance_ends_ok() {
     let m = Bump {
@@ -1101,22 +1103,20 @@ fn trust_a_steep_force_at_a_tight_tolerance_ends_ok() {
     };
     let x_ref = 2.989_534_031_764_425_5;
     let init = InitialState::from_velocity([0.0], [1.0]);
-    let runs = [(3, 1e-11), (3, 1e-12), (5, 1e-11), (5, 1e-12)];
-    for ((s, tol), max_step) in runs
-        .into_iter()
-        .flat_map(|r| [(r, f64::INFINITY), (r, m.w)])
-    {
-        let end = Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol)
-            .unwrap()
-            .max_step(max_step)
-            .unwrap()
-            .final_state(init, 3.0)
-            .unwrap_or_else(|f| panic!("lobatto{s} at {tol:e}: {}", f.error));
-        let err = (end.q[0] - x_ref).abs();
-        assert!(
-            err <= tol * (1.0 + x_ref),
-            "lobatto{s} at {tol:e}, max_step {max_step:e}: error {err:e}"
-        );
+    for s in 3..=6 {
+        for tol in [1e-11, 1e-12] {
+            let end = Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol)
+                .unwrap()
+                .max_step(m.w)
+                .unwrap()
+                .final_state(init, 3.0)
+                .unwrap_or_else(|f| panic!("lobatto{s} at {tol:e}: {}", f.error));
+            let err = (end.q[0] - x_ref).abs();
+            assert!(
+                err <= tol * (1.0 + x_ref),
+                "lobatto{s} at {tol:e}: error {err:e}"
+            );
+        }
     }
 }
 

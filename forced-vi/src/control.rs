@@ -232,6 +232,22 @@
 //! tolerance), lobatto3 at 1e-8 55 instead of 78; on the paper model (tol 1e-8) and on
 //! Kepler (tol 1e-10) lobatto2..7 took the same steps and Newton iterations within 4.
 //!
+//! *Readings below the estimate's resolution.* At a tight tolerance a difference may be all
+//! round-off: the estimate then reads its floor, which says only that the error is below
+//! the noise bounds it cut, and nothing about how far the step may grow. The estimate also
+//! gives its *resolution*, the norm per unit step of those bounds (the reading of a step
+//! whose every difference were at its bound). A reading below it lets the step grow only as
+//! far as an error at the resolution would allow, `(0.5 / resolution)^{1/p}`, clamped to
+//! `[1.1, 5]` (1.1 where the noise is above half the tolerance, so that the steps, whose
+//! noise per unit step falls as they grow, never shrink on noise), and it leaves the
+//! history term at the last resolved error. Before, the floor reading grew the step
+//! fivefold, that step failed, its retry passed with a floor reading again, and the history
+//! term of that reading shrank the next step: every other attempt was rejected. Measured on
+//! `ẍ = −x − 1` to T = 1000: lobatto3 at tol 1e-11 took 949767 steps and 474876
+//! rejections in 0.65 s, now 740550 steps and 1 rejection in 0.35 s; at 1e-12 (noise bounds
+//! twice the tolerance) 1105992 steps and 552957 rejections, now 895620 and 144475;
+//! lobatto5 at 1e-12 9003 and 4316, now 8357 and 1899; all within 0.5 of the tolerance.
+//!
 //! *The last step.* A step that would leave a sliver before the end goes to the end
 //! instead, where that is at most a step the controller predicts to pass: the last
 //! accepted step times `(0.5 / ‖e_prev‖)^{1/p}` (with no output time before the end, and
@@ -451,6 +467,9 @@ impl Controller {
     /// The error the last step of a run may be predicted to have when it is stretched to
     /// the end (see [`Controller::stretch`]).
     const STRETCH_ERR: f64 = 0.5;
+    /// The error a step whose reading is below the estimate's resolution may grow to (see
+    /// the module docs, "Readings below the estimate's resolution").
+    const RESOLVED: f64 = 0.5;
 
     /// How many times the last accepted step `h` a step may be, with an error predicted
     /// from the last one (`‖e‖ ∝ h^p`) of at most [`Self::STRETCH_ERR`]: the last step of a
@@ -475,18 +494,27 @@ impl Controller {
         }
     }
 
-    /// The next step after accepting a step `h` with error `err ≤ 1`.
-    pub(crate) fn accept(&mut self, h: f64, err: f64) -> f64 {
+    /// The next step after accepting a step `h` with error `err ≤ 1`, read by an estimate
+    /// of the given resolution.
+    pub(crate) fn accept(&mut self, h: f64, err: f64, resolution: f64) -> f64 {
         let err = err.max(1e-10);
         let mut fac =
             Self::SAFETY * err.powf(-0.7 / self.order) * self.err_prev.powf(0.4 / self.order);
         if self.rejected {
             fac = fac.min(1.0);
         }
-        // The history term is floored (Hairer's `facold`): an error far below the
-        // tolerance, as on the first steps from a cautious first step, says that the step
-        // may grow, not that the next error will jump.
-        self.err_prev = err.max(Self::ERR_PREV_FLOOR);
+        if err < resolution {
+            fac = fac.min(
+                (Self::RESOLVED / resolution)
+                    .powf(1.0 / self.order)
+                    .clamp(1.1, Self::MAX_FACTOR),
+            );
+        } else {
+            // The history term is floored (Hairer's `facold`): an error far below the
+            // tolerance, as on the first steps from a cautious first step, says that the
+            // step may grow, not that the next error will jump.
+            self.err_prev = err.max(Self::ERR_PREV_FLOOR);
+        }
         self.rejected = false;
         self.err_rejected = f64::INFINITY;
         h * fac.clamp(Self::MIN_FACTOR, Self::MAX_FACTOR)
@@ -563,8 +591,8 @@ mod tests {
         let mut c = Controller::new(4);
         assert!(c.reject(1.0, 100.0) < 1.0);
         // Right after a rejection the step does not grow.
-        assert!(c.accept(1.0, 1e-6) <= 1.0);
-        assert!(c.accept(1.0, 1e-12) <= 5.0);
+        assert!(c.accept(1.0, 1e-6, 0.0) <= 1.0);
+        assert!(c.accept(1.0, 1e-12, 0.0) <= 5.0);
         assert_eq!(c.reject(1.0, f64::INFINITY), 0.25);
     }
 
@@ -583,12 +611,28 @@ mod tests {
         let h = c.reject(1.0, 1.05);
         assert!((h - 0.9 * 1.05f64.powf(-0.25)).abs() < 1e-12, "{h}");
         // An accepted step ends the run of rejections.
-        c.accept(1.0, 0.5);
+        c.accept(1.0, 0.5, 0.0);
         let h4 = c.reject(1.0, 16.0);
         assert!((h4 - 0.45).abs() < 1e-12, "{h4}");
         // After a failed solve (an infinite error) a finite one follows the prediction.
         c.reject(1.0, f64::INFINITY);
         let h5 = c.reject(1.0, 16.0);
         assert!((h5 - 0.45).abs() < 1e-12, "{h5}");
+    }
+
+    #[test]
+    fn controller_grows_slowly_on_readings_below_the_resolution() {
+        let mut c = Controller::new(4);
+        c.accept(1.0, 0.5, 0.0);
+        // A reading at the round-off floor of an estimate whose noise bounds read 0.2: the
+        // step grows only as far as an error of 0.2 would allow, (0.5 / 0.2)^{1/4}.
+        let h = c.accept(1.0, 1e-5, 0.2);
+        assert!((h - 2.5f64.powf(0.25)).abs() < 1e-12, "{h}");
+        // The history keeps the last resolved error (0.5), not the floor reading.
+        let mut d = Controller::new(4);
+        d.accept(1.0, 0.5, 0.0);
+        assert_eq!(c.accept(1.0, 0.3, 0.0), d.accept(1.0, 0.3, 0.0));
+        // Noise bounds above the tolerance still let the step grow, by 1.1.
+        assert_eq!(c.accept(1.0, 1e-5, 3.0), 1.1);
     }
 }

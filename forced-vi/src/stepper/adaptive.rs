@@ -152,7 +152,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.unresolved = unresolved;
                         self.estimate = err / per_unit;
                         let chosen = self.controller;
-                        self.h_next = self.controller.accept(h, err);
+                        self.h_next = self.controller.accept(h, err, self.resolution);
                         if landing.is_some() && h < planned {
                             // Cut short for an output time: the step the controller planned
                             // stays on offer, and its history stays that of the steps it
@@ -222,6 +222,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         iters: &mut usize,
     ) -> Result<f64, StepFailure> {
         self.unresolved_step = 0.0;
+        self.resolution = 0.0;
         let Some(reference) = self.reference.as_mut() else {
             return Ok(0.0);
         };
@@ -265,8 +266,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             views,
             (backend as &dyn StepBackend, reference as &dyn StepBackend),
         );
-        let (err, unresolved) = local_error(steps, lhs, (tol, now), &mut self.err);
+        let (err, unresolved, resolution) = local_error(steps, lhs, (tol, now), &mut self.err);
         self.unresolved_step = unresolved;
+        self.resolution = resolution;
         Ok(err)
     }
 
@@ -456,15 +458,17 @@ fn time_rate(c: &[f64], backend: &dyn StepBackend, h: f64) -> f64 {
 /// The weighted norm, per unit step, of the difference between the step in `backend` and
 /// the reference's in `reference`, at their ends in `(q, p)`; `dp` is the step's momentum
 /// update and `err` is scratch for the difference. Also returns what the comparison left
-/// out as round-off, in the tolerance's norm (not per unit step; see [`crate::control`]).
-/// `timed`: the model depends on time.
+/// out as round-off, in the tolerance's norm (not per unit step; see [`crate::control`]),
+/// and the estimate's resolution: the norm per unit step of its noise bounds, the
+/// reading of a step whose every difference were at its bound. `timed`: the model depends
+/// on time.
 #[inline(always)]
 fn local_error<const N: usize>(
     ((view, view_r), (backend, reference)): (StepViews<'_>, (&dyn StepBackend, &dyn StepBackend)),
     (dp, h, per_unit, timed): (&[f64], f64, f64, bool),
     (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
     err: &mut (Vec<f64>, Vec<f64>),
-) -> (f64, f64) {
+) -> (f64, f64, f64) {
     let (s1, lay, z) = (view.scheme.stages() - 1, view.layout, view.z);
     let (r1, lay_r, zr) = (view_r.scheme.stages() - 1, view_r.layout, view_r.z);
     // The differences in the first `N` entries of each buffer, what is cut from them in the
@@ -519,16 +523,27 @@ fn local_error<const N: usize>(
             *size += i.abs();
         }
     }
+    // The noise bounds first (their norm per unit step is the estimate's resolution), then
+    // what each difference loses to them.
     for ((d, c), size) in ep.iter_mut().zip(cp.iter_mut()).zip(eq.iter()) {
-        *c = d.abs().min(noise * size);
-        *d = d.abs() - *c;
+        *c = noise * size;
+        *d = d.abs();
     }
     for (a, (e, c)) in eq.iter_mut().zip(cq.iter_mut()).enumerate() {
         let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
-        let d = (x - y).abs();
-        *c = d.min(noise * (x.abs() + y.abs() + q0_size));
-        *e = d - *c;
+        *c = noise * (x.abs() + y.abs() + q0_size);
+        *e = (x - y).abs();
     }
-    let (cq, cp) = (&cq[..N], &cp[..N]);
-    tol.error_and_cut_norms(per_unit, (eq, ep), (cq, cp), now)
+    let (cq, cp) = (&mut cq[..N], &mut cp[..N]);
+    let resolution = tol.error_norm(per_unit, (cq, cp), now);
+    for (e, c) in eq
+        .iter_mut()
+        .chain(ep.iter_mut())
+        .zip(cq.iter_mut().chain(cp.iter_mut()))
+    {
+        *c = e.min(*c);
+        *e -= *c;
+    }
+    let (err, unresolved) = tol.error_and_cut_norms(per_unit, (eq, ep), (cq, cp), now);
+    (err, unresolved, resolution)
 }

@@ -180,6 +180,8 @@ pub struct Stepper<'a, M, const N: usize> {
     /// [`crate::control`]).
     unresolved: f64,
     unresolved_step: f64,
+    /// The resolution of the last estimate (see `adaptive::local_error`).
+    resolution: f64,
     options: StepOptions,
     h: f64,
     t_final: f64,

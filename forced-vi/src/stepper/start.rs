@@ -108,6 +108,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             round_off_sq: 0.0,
             unresolved: 0.0,
             unresolved_step: 0.0,
+            resolution: 0.0,
             lift_lambda,
             options,
             h,
