@@ -14,8 +14,10 @@
 //! | indexing and integer arithmetic of model code that never panics | `int` |
 //! | the dense node kernels: term gradients and Hessians, force rows and Jacobians | `dense` |
 //! | per-term kernels of split models (sparse kernels, DESIGN §9): slots, `Accum` | `terms` |
+//! | elementary functions whose num-dual form overflows where they are finite (`tanh`) | `functions` |
 
 mod dense;
+mod functions;
 mod int;
 mod terms;
 
@@ -31,5 +33,6 @@ pub use nalgebra::{SMatrix, SVector};
 pub use crate::model::{Block, NodeSink, SparseNode};
 
 pub use dense::*;
+pub use functions::*;
 pub use int::*;
 pub use terms::*;
