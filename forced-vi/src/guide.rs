@@ -180,6 +180,12 @@
 //! - blocks with `let` (and `let mut`), `if`/`else` (on coordinates, parameters or `t`),
 //!   `for` loops over integer ranges, and index sums `(a..b).map(|i| ..).sum()`.
 //!
+//! `tanh` is taken in a form whose derivatives stay finite at any argument (num-dual's own,
+//! `sinh / cosh`, is NaN from `|x| ≈ 355`), so a regularised Coulomb friction
+//! `−mu * (x_dot / eps).tanh()` runs at any speed. A force that jumps (`signum`, or an `if`
+//! on a velocity) is accepted, but a run across the jump ends in a typed error there (see
+//! [`control`](crate::control), "Forces that jump"): regularise it.
+//!
 //! Names starting with `__fvi`, and `__D`, are reserved; `t` is the time.
 //!
 //! ```

@@ -350,6 +350,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         self.newton.iteration.reject_carry()
     }
 
+    fn next_correction(&mut self) -> (f64, f64, bool) {
+        self.newton.next_correction()
+    }
+
     fn set_costly_factors(&mut self, costly: bool) {
         self.newton.iteration.set_costly_factors(costly)
     }

@@ -139,6 +139,10 @@ pub(crate) trait StepBackend {
     fn carried_error(&self) -> f64;
     /// Refuses the last solve's carried factors: the next solves make fresh ones.
     fn reject_carry(&mut self);
+    /// The size (max-norm, in the unknowns) of the Newton correction that would follow the
+    /// last solve's iterate, with its factors, of its last correction, and whether its
+    /// residual was at its round-off floor (see `crate::newton`'s iteration).
+    fn next_correction(&mut self) -> (f64, f64, bool);
     /// Marks the model's factors as costly: after carried factors fail, the next solve
     /// carries again (see the `crate::newton` iteration's `set_costly_factors`).
     fn set_costly_factors(&mut self, costly: bool);
@@ -358,6 +362,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn reject_carry(&mut self) {
         forward!(self, b => b.reject_carry())
+    }
+    fn next_correction(&mut self) -> (f64, f64, bool) {
+        forward!(self, b => b.next_correction())
     }
     fn set_costly_factors(&mut self, costly: bool) {
         forward!(self, b => b.set_costly_factors(costly))

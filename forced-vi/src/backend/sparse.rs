@@ -258,6 +258,10 @@ impl StepBackend for SparseBackend<'_> {
         self.newton.iteration.reject_carry()
     }
 
+    fn next_correction(&mut self) -> (f64, f64, bool) {
+        self.newton.next_correction::<SparseStep<'_>>()
+    }
+
     fn set_costly_factors(&mut self, costly: bool) {
         self.newton.iteration.set_costly_factors(costly)
     }

@@ -85,6 +85,10 @@ pub(crate) struct Iteration<V> {
     z_trial: V,
     pub(crate) have_factors: bool,
     pub(crate) last_iterations: usize,
+    /// The size (max-norm) of the last solve's last correction, and whether the residual
+    /// at its last iterate was at its round-off floor.
+    last_step: f64,
+    last_at_floor: bool,
     /// Factors carried over from the last solve: the direction they give is scaled by
     /// this ratio of step sizes (see [`Iteration::carry_factors`]).
     carry: Option<f64>,
@@ -147,6 +151,8 @@ impl<V: Buffer + Clone> Iteration<V> {
             z_trial: zero,
             have_factors: false,
             last_iterations: 0,
+            last_step: 0.0,
+            last_at_floor: false,
             carry: None,
             step_h: f64::NAN,
             factors_h: f64::NAN,
@@ -199,6 +205,23 @@ impl<V: Buffer> Iteration<V> {
     /// error estimate compares it with the tolerance.
     pub(crate) fn carried_error(&self) -> f64 {
         self.carried_error
+    }
+
+    /// The size (max-norm) of the correction that would follow the last solve's iterate,
+    /// `|J⁻¹ R(z)|` with its last factors and the residual evaluated at that iterate (the
+    /// iterate's error to first order where the residual is smooth), the size of the last
+    /// correction made, and whether the residual there was at its round-off floor (where
+    /// the next correction is noise). Infinite without factors or where the solve
+    /// overflows.
+    pub(crate) fn next_correction<S: ?Sized, L: LinearSolver<S, Vector = V>>(
+        &mut self,
+        lin: &mut L,
+    ) -> (f64, f64, bool) {
+        if !self.have_factors {
+            return (f64::INFINITY, self.last_step, self.last_at_floor);
+        }
+        let next = self.direction::<S, L>(lin).unwrap_or(f64::INFINITY);
+        (next, self.last_step, self.last_at_floor)
     }
 
     /// Refuses the carried factors of the last solve after the fact: the next solves make
@@ -338,6 +361,7 @@ impl<V: Buffer> Iteration<V> {
             }
             rnorm = trial_norm;
             prev_step = step;
+            self.last_step = step;
             let znorm = max_norm(z.entries());
             let floor = round_off_floor(scale + noise, jac_scale, znorm);
             // A residual at the round-off floor cannot be reduced further: the iterate is as
@@ -346,6 +370,7 @@ impl<V: Buffer> Iteration<V> {
             // of its terms) ends the solve: where a linear system lands in one correction
             // (measured: at most 0.5 ε on the damped oscillator), not the 13 ε and more of
             // a nonlinear one's first iterate, which a second correction still improves.
+            self.last_at_floor = rnorm <= floor;
             let at_floor = rnorm <= if it > 1 { floor } else { floor / 16.0 };
             let small_error = error_estimate(it, step, theta) <= o.rtol * znorm + o.atol;
             // After a far start the second iterate is accepted by the error test alone

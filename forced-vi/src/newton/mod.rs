@@ -165,6 +165,13 @@ impl Newton {
         self.iteration.last_iterations
     }
 
+    /// The size of the correction that would follow the last solve's iterate (see the
+    /// iteration's `next_correction`).
+    pub(crate) fn next_correction(&mut self) -> (f64, f64, bool) {
+        self.iteration
+            .next_correction::<dyn NonlinearSystem, _>(&mut self.linear)
+    }
+
     /// Forgets reusable Jacobian factors (call when the problem changes).
     pub fn invalidate(&mut self) {
         self.iteration.have_factors = false;

@@ -71,6 +71,12 @@ impl SparseNewton {
         &self.iteration.opts
     }
 
+    /// The size of the correction that would follow the last solve's iterate (see the
+    /// iteration's `next_correction`).
+    pub(crate) fn next_correction<S: SparseSystem>(&mut self) -> (f64, f64, bool) {
+        self.iteration.next_correction::<S, _>(&mut self.lu)
+    }
+
     /// Forgets the factors.
     pub(crate) fn invalidate(&mut self) {
         self.iteration.have_factors = false;

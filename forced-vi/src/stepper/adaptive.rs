@@ -412,30 +412,61 @@ fn solve_reference<const N: usize>(
     err: &mut (Vec<f64>, Vec<f64>),
     iters: &mut usize,
 ) -> Result<bool, StepFailure> {
-    match reference.solve(h, t0, (q0, p0), scale) {
-        Ok(rep) => *iters += rep.iterations,
-        // One iteration is what the estimate asks for (its options cap it there).
-        Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
-            *iters += reference.last_iterations()
+    let mut before = f64::INFINITY;
+    for _ in 0..=REFERENCE_ROUNDS {
+        match reference.solve(h, t0, (q0, p0), scale) {
+            Ok(rep) => *iters += rep.iterations,
+            // One iteration is what the estimate asks for (its options cap it there).
+            Err(StepFailure::Newton(NewtonFailure::MaxIterations { .. })) => {
+                *iters += reference.last_iterations()
+            }
+            Err(f) => {
+                *iters += reference.last_iterations();
+                return Err(f);
+            }
         }
-        Err(f) => {
-            *iters += reference.last_iterations();
-            return Err(f);
+        // The carried factors' error, as an error in every position and momentum: at most
+        // a tenth of the tolerance, or the estimate is made again with fresh factors.
+        let left = reference.carried_error();
+        if left > 0.0 {
+            err.0.fill(left);
+            err.1.fill(left);
+            if tol.error_norm(per_unit, (&err.0, &err.1), now) > 0.1 {
+                reference.reject_carry();
+                return Ok(false);
+            }
+            return Ok(true);
         }
+        // With fresh factors, one iteration from the lifted step is the reference to second
+        // order where the step equations are smooth: the correction that would follow is
+        // then far smaller than the one made, or the residual is at its round-off. Where
+        // neither holds and the correction matters to the tolerance (a force that jumps
+        // between the nodes of the step and of the reference; see `crate::control`,
+        // "Forces that jump"), the reference iterates on while its corrections shrink; one
+        // that does not settle leaves the step unchecked, and the step is retried smaller.
+        let (next, made, at_floor) = reference.next_correction();
+        err.0.fill(next);
+        err.1.fill(next);
+        if at_floor
+            || next <= CONTRACTION * made
+            || tol.error_norm(per_unit, (&err.0, &err.1), now) <= 0.1
+        {
+            return Ok(true);
+        }
+        if next >= CONTRACTION * before {
+            break;
+        }
+        before = next;
     }
-    // The carried factors' error, as an error in every position and momentum: at most a
-    // tenth of the tolerance, or the estimate is made again with fresh factors.
-    let left = reference.carried_error();
-    if left > 0.0 {
-        err.0.fill(left);
-        err.1.fill(left);
-        if tol.error_norm(per_unit, (&err.0, &err.1), now) > 0.1 {
-            reference.reject_carry();
-            return Ok(false);
-        }
-    }
-    Ok(true)
+    Err(StepFailure::Newton(NewtonFailure::MaxIterations {
+        residual: f64::INFINITY,
+    }))
 }
+
+/// The further iterations the reference may take when its first one does not land (see
+/// [`solve_reference`]), and the contraction below which a correction counts as landed.
+const REFERENCE_ROUNDS: usize = 3;
+const CONTRACTION: f64 = 0.25;
 
 /// The largest rate of change in time of `L_q + F` between neighbouring quadrature nodes
 /// (`c`, on `[0, 1]`) of the step of size `h` in `backend`: a stand-in for `|∂ₜ(L_q + F)|`
