@@ -254,8 +254,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
             let start = (st.t_state, &st.q.sum[..], &st.p.sum[..]);
             let solve = (h, scale, per_unit);
-            if solve_reference(reference, start, solve, (tol, now), &mut self.err, iters)? {
-                break;
+            match solve_reference(reference, start, solve, (tol, now), &mut self.err, iters)? {
+                Some(true) => break,
+                Some(false) => {}
+                // No reference to check the step against: it is retried smaller, as a step
+                // that failed its estimate.
+                None => return Ok(f64::INFINITY),
             }
         }
         let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
@@ -400,10 +404,11 @@ fn lift_step<const N: usize>(
     }
 }
 
-/// The reference's solve (one iteration) from `start = (t0, q0, p0)`, `solve = (h, scale,
-/// per_unit)`; counts its iterations in `iters`. Returns false if the factors it carried
-/// left an error above a tenth of the tolerance at the step's end `now` (they are then
-/// refused, and the estimate must be made again); `err` is scratch.
+/// The reference's solve (one iteration, more where it does not land) from `start = (t0,
+/// q0, p0)`, `solve = (h, scale, per_unit)`; counts its iterations in `iters`. Returns
+/// `Some(false)` if the factors it carried left an error above a tenth of the tolerance at
+/// the step's end `now` (they are then refused, and the estimate must be made again), and
+/// `None` if its iterations did not land; `err` is scratch.
 fn solve_reference<const N: usize>(
     reference: &mut dyn StepBackend,
     (t0, q0, p0): (f64, &[f64], &[f64]),
@@ -411,7 +416,7 @@ fn solve_reference<const N: usize>(
     (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
     err: &mut (Vec<f64>, Vec<f64>),
     iters: &mut usize,
-) -> Result<bool, StepFailure> {
+) -> Result<Option<bool>, StepFailure> {
     let mut before = f64::INFINITY;
     for _ in 0..=REFERENCE_ROUNDS {
         match reference.solve(h, t0, (q0, p0), scale) {
@@ -433,9 +438,9 @@ fn solve_reference<const N: usize>(
             err.1.fill(left);
             if tol.error_norm(per_unit, (&err.0, &err.1), now) > 0.1 {
                 reference.reject_carry();
-                return Ok(false);
+                return Ok(Some(false));
             }
-            return Ok(true);
+            return Ok(Some(true));
         }
         // With fresh factors, one iteration from the lifted step is the reference to second
         // order where the step equations are smooth: the correction that would follow is
@@ -451,16 +456,14 @@ fn solve_reference<const N: usize>(
             || next <= CONTRACTION * made
             || tol.error_norm(per_unit, (&err.0, &err.1), now) <= 0.1
         {
-            return Ok(true);
+            return Ok(Some(true));
         }
         if next >= CONTRACTION * before {
             break;
         }
         before = next;
     }
-    Err(StepFailure::Newton(NewtonFailure::MaxIterations {
-        residual: f64::INFINITY,
-    }))
+    Ok(None)
 }
 
 /// The further iterations the reference may take when its first one does not land (see
