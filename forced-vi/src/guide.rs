@@ -182,7 +182,9 @@
 //!
 //! `tanh` is taken in a form whose derivatives stay finite at any argument (num-dual's own,
 //! `sinh / cosh`, is NaN from `|x| ≈ 355`), so a regularised Coulomb friction
-//! `−mu * (x_dot / eps).tanh()` runs at any speed. A force that jumps (`signum`, or an `if`
+//! `−mu * (x_dot / eps).tanh()` runs at any speed; and `powf` with a real exponent in one
+//! that is exact at a zero or tiny base (num-dual's is NaN at `0.0` and infinite at
+//! `1e-160.powf(0.5)`), so `x.powf(2.5)` runs from `x = 0`. A force that jumps (`signum`, or an `if`
 //! on a velocity) is accepted, but a run across the jump ends in a typed error there (see
 //! [`control`](crate::control), "Forces that jump"): regularise it.
 //!

@@ -389,6 +389,13 @@ fn dual_method(
         out.tokens = quote_spanned!(span=> ::forced_vi::__private::tanh(#rt));
         return out;
     }
+    if method_name == "powf" && args.len() == 1 {
+        // num-dual's `powf` is NaN at a zero base and overflows at a small one (see the
+        // runtime's helper); a dual exponent took `powd` above.
+        let n = &args[0].tokens;
+        out.tokens = quote_spanned!(span=> ::forced_vi::__private::powf(#rt, #n));
+        return out;
+    }
     let at = args.iter().map(|a| &a.tokens);
     out.tokens = quote!(#rt.#method(#(#at),*));
     out
