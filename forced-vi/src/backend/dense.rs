@@ -12,6 +12,18 @@ use crate::scalar::all_finite;
 use crate::scheme::Scheme;
 use crate::step_equations::StepProblem;
 
+/// The fewest unknowns at which a fixed step starts from the last step's factors (see
+/// [`DenseBackend`]'s `solve`). The factors save a Jacobian and its LU at the cost of a
+/// second residual and solve; measured on the coupled van der Pol oscillators (callgrind,
+/// 2000 fixed steps, `N = 2`), instructions against fresh factors at every step: lobatto2
+/// (2 unknowns) +7 %, lobatto3 (4) +5 %, lobatto4 (6) −7 %, lobatto5 (8) −13 %, lobatto6
+/// (10) −20 %, lobatto7 (12) −25 %, lobatto9 (16) −27 %.
+const ACROSS_MIN_UNKNOWNS: usize = 6;
+
+/// Step sizes within this relative difference count as the same for the factors carried
+/// across steps (fixed steps differ by the rounding of the clock).
+const SAME_STEP: f64 = 1e-8;
+
 /// The dense step equations, their Newton solver and the unknowns.
 pub(crate) struct DenseBackend<'a, M, const N: usize> {
     prob: StepProblem<'a, M, N>,
@@ -33,6 +45,9 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     rate: Vec<f64>,
     /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
     carry: bool,
+    /// A solve of the same step size as the last may start from its factors
+    /// ([`StepBackend::factors_across_steps`]).
+    across_steps: bool,
 }
 
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
@@ -75,6 +90,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             adjoint: None,
             tangent: None,
             carry: false,
+            across_steps: false,
         }
     }
 }
@@ -309,16 +325,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     ) -> Result<NewtonReport, StepFailure> {
         let prob = &mut self.prob;
         prob.nodes_valid = false;
+        let same_h = (prob.h - h).abs() <= SAME_STEP * h.abs();
         prob.h = h;
         prob.t0 = t0;
         prob.q0.as_mut_slice().copy_from_slice(q0);
         prob.p0.as_mut_slice().copy_from_slice(p0);
-        // A fresh Jacobian at each step: carried over from the step before, its factors
-        // take 10–17 % off a small model's step but leave the iterate only as exact as the
-        // Newton tolerance (measured: the energy balance of lobatto5 on the driven Duffing
-        // scene then bends at 4e-13), where a fresh one lands far below it. The error
-        // estimate's one iteration may carry them ([`StepBackend::carry_factors`]).
-        if !std::mem::take(&mut self.carry) {
+        // Fixed steps of one size (`across_steps`) start from the factors of the step
+        // before where the system has at least `ACROSS_MIN_UNKNOWNS` unknowns: the Newton
+        // iteration then accepts an iterate only once its estimated error is below the
+        // round-off of the increments, and makes fresh factors for a while after a solve
+        // that took more than two iterations (see `crate::newton`'s iteration). Otherwise a
+        // fresh Jacobian at each step, which from the predictor lands in one iteration. The
+        // error estimate's one iteration may carry them ([`StepBackend::carry_factors`]).
+        let carry = std::mem::take(&mut self.carry);
+        let across =
+            self.across_steps && same_h && prob.cons == 0 && self.z.len() >= ACROSS_MIN_UNKNOWNS;
+        if !(carry || across) {
             self.newton.invalidate();
         }
         let solved = self.newton.solve(prob, &mut self.z, scale);
@@ -352,6 +374,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     fn next_correction(&mut self) -> (f64, f64, bool) {
         self.newton.next_correction()
+    }
+
+    fn factors_across_steps(&mut self, on: bool) {
+        self.across_steps = on;
     }
 
     fn set_costly_factors(&mut self, costly: bool) {

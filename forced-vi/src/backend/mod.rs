@@ -146,6 +146,10 @@ pub(crate) trait StepBackend {
     /// Marks the model's factors as costly: after carried factors fail, the next solve
     /// carries again (see the `crate::newton` iteration's `set_costly_factors`).
     fn set_costly_factors(&mut self, costly: bool);
+    /// Lets a solve start from the factors of the last one where the step size is the same
+    /// (simplified Newton across steps; see the dense backend's `solve`). The sparse
+    /// backend always does, its LU being most of a step's cost.
+    fn factors_across_steps(&mut self, on: bool);
     /// `L_q + F` at quadrature node `i` of the last residual evaluation.
     fn node_fq(&self, i: usize) -> &[f64];
     /// The position at quadrature node `i`.
@@ -368,6 +372,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     }
     fn set_costly_factors(&mut self, costly: bool) {
         forward!(self, b => b.set_costly_factors(costly))
+    }
+    fn factors_across_steps(&mut self, on: bool) {
+        forward!(self, b => b.factors_across_steps(on))
     }
     #[inline(always)]
     fn node_fq(&self, i: usize) -> &[f64] {

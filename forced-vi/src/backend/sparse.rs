@@ -262,6 +262,8 @@ impl StepBackend for SparseBackend<'_> {
         self.newton.next_correction::<SparseStep<'_>>()
     }
 
+    fn factors_across_steps(&mut self, _on: bool) {}
+
     fn set_costly_factors(&mut self, costly: bool) {
         self.newton.iteration.set_costly_factors(costly)
     }

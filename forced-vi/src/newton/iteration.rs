@@ -107,6 +107,12 @@ pub(crate) struct Iteration<V> {
     /// A second correction of carried factors at most this large is not applied (see
     /// [`Iteration::carry_factors`]).
     negligible: f64,
+    /// The largest entry of the Jacobian at the last refresh.
+    jac_scale: f64,
+    /// Solves left that make fresh factors before those of an earlier solve are tried
+    /// again, and the next such pause (see [`Iteration::stale_outcome`]).
+    stale_skip: u32,
+    stale_backoff: u32,
 }
 
 /// Max-norm that propagates NaN (unlike `f64::max`).
@@ -161,6 +167,9 @@ impl<V: Buffer + Clone> Iteration<V> {
             costly_factors: false,
             carried_error: 0.0,
             negligible: 0.0,
+            jac_scale: 0.0,
+            stale_skip: 0,
+            stale_backoff: 0,
         }
     }
 }
@@ -278,6 +287,32 @@ impl<V: Buffer> Iteration<V> {
         let mut far_start = false;
         // Factors carried over from the last solve (see `carry_factors`).
         let mut carried = self.carry.take().filter(|_| self.have_factors);
+        // Factors made for an earlier solve (simplified Newton across steps, where factors
+        // are cheap next to a residual: the dense backend's fixed steps). Their first
+        // correction leaves an error θ times itself, and a residual at its round-off floor
+        // does not show that the iterate is as exact as a fresh Jacobian's first one: the
+        // residual's floor counts the round-off of terms `|J| |z|` that a step of the same
+        // size cancels, so an iterate accepted there moved the momentum by up to a few
+        // hundred ulps per step (measured: Kepler with drag, lobatto7 at 256 steps, 7e-14
+        // against 1e-15 off at T = 20; with fresh factors on every step or with the test
+        // below, 1e-15 to 4e-15). Until they are refreshed, an iterate is accepted only
+        // from the second iteration on, once its estimated error (θ / (1 − θ) times the last
+        // correction) is below the round-off of the increments; a solve that needs more
+        // than two iterations makes the next ones start from fresh factors (1, 3, 7, … of
+        // them after successive failures), since the factors then cost more than they save.
+        let mut stale = o.simplified
+            && self.have_factors
+            && carried.is_none()
+            && !(L::COSTLY_FACTORS || self.costly_factors);
+        if stale && self.stale_skip > 0 {
+            self.stale_skip -= 1;
+            self.have_factors = false;
+            stale = false;
+        }
+        let began_stale = stale;
+        if stale {
+            jac_scale = self.jac_scale;
+        }
         self.carried_error = 0.0;
         self.last_iterations = 0;
         let mut it = 0;
@@ -286,6 +321,8 @@ impl<V: Buffer> Iteration<V> {
             self.last_iterations = it;
             if carried.is_none() && !(o.simplified && self.have_factors) {
                 jac_scale = lin.refresh(sys, z)?;
+                self.jac_scale = jac_scale;
+                stale = false;
                 noise = L::residual_noise(sys);
                 self.have_factors = true;
                 self.factors_h = self.step_h;
@@ -377,7 +414,15 @@ impl<V: Buffer> Iteration<V> {
             // (its contraction measured), not for a residual at the floor.
             let polished = !(far_start && it < 3)
                 || (it == 2 && small_error && rnorm <= res_tol && halvings == 0);
-            if ((small_error && rnorm <= res_tol && halvings == 0) || at_floor) && polished {
+            let accepted = if stale {
+                it > 1 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
+            } else {
+                ((small_error && rnorm <= res_tol && halvings == 0) || at_floor) && polished
+            };
+            if accepted {
+                if began_stale {
+                    self.stale_outcome(stale && it <= 2);
+                }
                 return Ok(NewtonReport {
                     iterations: it,
                     residual: rnorm,
@@ -385,17 +430,39 @@ impl<V: Buffer> Iteration<V> {
                     residual_bound: res_tol.max(floor),
                 });
             }
+            // Factors of an earlier solve get two iterations: an iterate they have not
+            // brought below round-off by then (the increments themselves may be at the
+            // round-off of the positions, a step from near rest) is finished with fresh
+            // ones, by the tests above.
+            if stale && it >= 2 {
+                self.have_factors = false;
+            }
             far_start |= it == 1 && o.simplified && L::COSTLY_FACTORS && step > FAR_START * znorm;
             // (After the last iteration there is none to refresh for; the factors may still
             // be carried to the next solve, which checks them.)
             if o.simplified
                 && it < o.max_iterations
-                && wants_fresh_jacobian(it, theta, step, znorm, L::COSTLY_FACTORS)
+                && wants_fresh_jacobian(it, theta, step, znorm, L::COSTLY_FACTORS || stale)
             {
                 self.have_factors = false;
             }
         }
+        if began_stale {
+            self.stale_outcome(false);
+        }
         Err(NewtonFailure::MaxIterations { residual: rnorm })
+    }
+
+    /// After a solve that began with factors of an earlier one: on success (accepted by
+    /// its second iteration) they are tried again on the next solve; otherwise the next
+    /// solves make fresh factors first (1, 3, 7, … of them after successive failures).
+    fn stale_outcome(&mut self, paid: bool) {
+        if paid {
+            self.stale_backoff = 0;
+        } else {
+            self.stale_skip = self.stale_backoff;
+            self.stale_backoff = (2 * self.stale_backoff + 1).min(CARRY_BACKOFF_MAX);
+        }
     }
 
     /// The Newton direction `dz = −J⁻¹ R` from the current factors; returns `|dz|`.

@@ -19,9 +19,11 @@ pub struct NewtonOptions {
     /// Halvings allowed in the line search before declaring stagnation (default 10).
     pub max_backtracks: usize,
     /// Reuse the Jacobian's LU factors across the iterations of one solve (simplified
-    /// Newton) (default true). The factors are kept only while the contraction rate stays
-    /// below 1e-2, so the accepted iterate is as exact as full Newton's; the round-off-level
-    /// error floors depend on that.
+    /// Newton) (default true), and, for fixed steps of at least 6 unknowns, across steps.
+    /// The factors are kept only while the contraction rate stays below 1e-2, and those of
+    /// an earlier step until the iterate's estimated error is below round-off, so the
+    /// accepted iterate is as exact as full Newton's; the round-off-level error floors
+    /// depend on that.
     pub simplified: bool,
 }
 

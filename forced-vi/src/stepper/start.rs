@@ -59,6 +59,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         if let Some(r) = reference.as_mut() {
             r.set_costly_factors(band);
         }
+        // Fixed steps of one size reuse the step Jacobian's factors while they pay (see
+        // `crate::newton`); adaptive steps, whose error estimate reads the step's node
+        // blocks, make fresh ones.
+        backend.factors_across_steps(tolerance.is_none());
         check_run(&options, t_final)?;
         options.check_step_bounds()?;
         // The step polynomial (and its node blocks, or a constrained step's multipliers)
