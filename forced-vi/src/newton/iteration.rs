@@ -396,6 +396,9 @@ impl<V: Buffer> Iteration<V> {
                     });
                 }
             }
+            // The residual's contraction over this iteration: with factors of an earlier
+            // solve, about the relative error θ of their correction.
+            let contraction = trial_norm / rnorm;
             rnorm = trial_norm;
             prev_step = step;
             self.last_step = step;
@@ -435,6 +438,11 @@ impl<V: Buffer> Iteration<V> {
             // round-off of the positions, a step from near rest) is finished with fresh
             // ones, by the tests above.
             if stale && it >= 2 {
+                self.have_factors = false;
+            }
+            // After their first correction, the second leaves about θ² times the first:
+            // where that will not be below round-off, fresh factors now save an iteration.
+            if stale && it == 1 && contraction * contraction * step > f64::EPSILON * znorm {
                 self.have_factors = false;
             }
             far_start |= it == 1 && o.simplified && L::COSTLY_FACTORS && step > FAR_START * znorm;
