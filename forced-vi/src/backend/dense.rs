@@ -335,8 +335,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         // iteration then accepts an iterate only once its estimated error is below the
         // round-off of the increments, and makes fresh factors for a while after a solve
         // that took more than two iterations (see `crate::newton`'s iteration). Otherwise a
-        // fresh Jacobian at each step, which from the predictor lands in one iteration. The
-        // error estimate's one iteration may carry them ([`StepBackend::carry_factors`]).
+        // fresh Jacobian at each step, which from the predictor lands in one iteration. Not
+        // for a constrained model: its steps already take two iterations, and with carried
+        // factors its constraint residuals grew from 1e-15 to up to 1e-12 (Cartesian
+        // pendulum, lobatto3–7). The error estimate's one iteration may carry them
+        // ([`StepBackend::carry_factors`]).
         let carry = std::mem::take(&mut self.carry);
         let across =
             self.across_steps && same_h && prob.cons == 0 && self.z.len() >= ACROSS_MIN_UNKNOWNS;
