@@ -61,6 +61,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
         // increment 0); the constraint unknowns after them are not positions.
         let s1 = self.scheme.stages() - 1;
         let zs = &zs[..s1.min(zs.len())];
+        // The common sizes with their loops unrolled (the same sums, in the same order).
+        let unrolled = match zs.len() {
+            1 => self.nodes_unrolled::<1>(zs),
+            2 => self.nodes_unrolled::<2>(zs),
+            3 => self.nodes_unrolled::<3>(zs),
+            4 => self.nodes_unrolled::<4>(zs),
+            5 => self.nodes_unrolled::<5>(zs),
+            6 => self.nodes_unrolled::<6>(zs),
+            7 => self.nodes_unrolled::<7>(zs),
+            _ => false,
+        };
+        if unrolled {
+            return;
+        }
         let inv_h = 1.0 / self.h;
         for (i, (xi, vi)) in self.xs.iter_mut().zip(self.vs.iter_mut()).enumerate() {
             let (phi, psi) = self.scheme.basis_rows(i);
@@ -80,6 +94,65 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
             *vi = v * inv_h;
         }
     }
+
+    /// [`Self::nodes`] for `S1` control points after the first, as fixed-size loops; false
+    /// (nothing done) where the scheme's rows do not have that size.
+    #[inline(always)]
+    fn nodes_unrolled<const S1: usize>(&mut self, zs: &[[f64; N]]) -> bool {
+        let Ok(zs) = <&[[f64; N]; S1]>::try_from(zs) else {
+            return false;
+        };
+        let (sch, inv_h) = (self.scheme, 1.0 / self.h);
+        for (i, (xi, vi)) in self.xs.iter_mut().zip(self.vs.iter_mut()).enumerate() {
+            let (phi, psi) = sch.basis_rows(i);
+            let rows = phi.get(1..=S1).zip(psi.get(1..=S1));
+            let Some((Ok(phi), Ok(psi))) =
+                rows.map(|(a, b)| (<&[f64; S1]>::try_from(a), b.try_into()))
+            else {
+                continue;
+            };
+            let psi: &[f64; S1] = psi;
+            let (mut x, mut v) = (self.q0, SVector::<f64, N>::zeros());
+            for j in 0..S1 {
+                for a in 0..N {
+                    x[a] += phi[j] * zs[j][a];
+                    v[a] += psi[j] * zs[j][a];
+                }
+            }
+            *xi = x;
+            *vi = v * inv_h;
+        }
+        true
+    }
+
+    /// The gradient rows of the residual from the node gradients, for `R` quadrature nodes
+    /// as fixed-size loops (the same sums, in the same order as the general loop of
+    /// [`NonlinearSystem::residual`]); false (nothing done) for another node count.
+    #[inline(always)]
+    fn rows_unrolled<const R: usize>(&self, rs: &mut [[f64; N]]) -> bool {
+        let (sch, h) = (self.scheme, self.h);
+        let Some(Ok(grads)) = self.grads.get(..R).map(<&[NodeGradient<N>; R]>::try_from) else {
+            return false;
+        };
+        if sch.quadrature_nodes() != R {
+            return false;
+        }
+        for (j, rj) in rs.iter_mut().take(sch.stages() - 1).enumerate() {
+            let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
+            let (wf, wl) = sch.residual_weights(j);
+            let (Ok(wf), Ok(wl)) = (<&[f64; R]>::try_from(wf), <&[f64; R]>::try_from(wl)) else {
+                return false;
+            };
+            for i in 0..R {
+                let (cf, l, g) = (wf[i] * h, wl[i], &grads[i]);
+                for a in 0..N {
+                    gj[a] += cf * g.fq[a] + l * g.lv[a];
+                }
+            }
+            rj.copy_from_slice(gj.as_slice());
+        }
+        true
+    }
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
@@ -95,7 +168,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             self.grads[i] = g;
         }
         let (rs, _) = r.as_mut_slice().as_chunks_mut::<N>();
+        let unrolled = match sch.quadrature_nodes() {
+            2 => self.rows_unrolled::<2>(rs),
+            3 => self.rows_unrolled::<3>(rs),
+            4 => self.rows_unrolled::<4>(rs),
+            5 => self.rows_unrolled::<5>(rs),
+            6 => self.rows_unrolled::<6>(rs),
+            7 => self.rows_unrolled::<7>(rs),
+            8 => self.rows_unrolled::<8>(rs),
+            _ => false,
+        };
         for (j, rj) in rs.iter_mut().take(sch.stages() - 1).enumerate() {
+            if unrolled {
+                break;
+            }
             let mut gj = if j == 0 { self.p0 } else { SVector::zeros() };
             let (wf, wl) = sch.residual_weights(j);
             for ((g, &f), &l) in self.grads.iter().zip(wf).zip(wl) {
