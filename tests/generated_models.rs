@@ -22,7 +22,7 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     v: [f64; N],
     q2: [f64; N],
     v2: [f64; N],
-) -> [bool; 3] {
+) -> [bool; 4] {
     let s = M::STRUCTURE;
     // The promise of no constraints (the runtime then compiles no constraint code).
     assert!(
@@ -70,7 +70,12 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
             blocks(&k).iter().any(|x| !x.is_finite()),
             "{name}: general path non-finite, kernels finite at q = {q:?}, v = {v:?}"
         );
-        return [!s.has_force, !s.force_uses_velocity, s.constant_mass];
+        return [
+            !s.has_force,
+            !s.force_uses_velocity,
+            s.constant_mass,
+            s.linear,
+        ];
     }
     let pairs = [
         ("fq", k.grad.fq.as_slice(), g.grad.fq.as_slice()),
@@ -129,7 +134,27 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
             );
         }
     }
-    [!s.has_force, !s.force_uses_velocity, s.constant_mass]
+    if s.linear {
+        // Every block, not only the mass, is the same at the second point.
+        let g2 = general::node_jacobian(m, &qs2, &vs2);
+        let (b1, b2) = ([g.a, g.b, g.c, g.e], [g2.a, g2.b, g2.c, g2.e]);
+        for (a, b) in b1
+            .iter()
+            .flat_map(|x| x.iter())
+            .zip(b2.iter().flat_map(|x| x.iter()))
+        {
+            assert!(
+                close(*a, *b),
+                "{name}: linear = true but a block changes: {a:e} vs {b:e}"
+            );
+        }
+    }
+    [
+        !s.has_force,
+        !s.force_uses_velocity,
+        s.constant_mass,
+        s.linear,
+    ]
 }
 
 #[forced_lagrangian(
@@ -525,7 +550,7 @@ fn pick<const N: usize>(p: &[f64], which: usize) -> [f64; N] {
     std::array::from_fn(|i| p[(which * 3 + i) % p.len()])
 }
 
-fn check_all(p: &[f64], pa: f64, pb: f64) -> Vec<[bool; 3]> {
+fn check_all(p: &[f64], pa: f64, pb: f64) -> Vec<[bool; 4]> {
     let mut claims = Vec::new();
     let m = Gen00 { a: pa, b: pb };
     claims.push(check(
@@ -909,7 +934,7 @@ proptest! {
 fn trust_generated_models_make_claims_both_ways() {
     let p: Vec<f64> = (0..12).map(|i| 0.1 * i as f64 - 0.55).collect();
     let claims = check_all(&p, 1.0, 0.3);
-    for k in 0..3 {
+    for k in 0..4 {
         assert!(
             claims.iter().any(|c| c[k]) && claims.iter().any(|c| !c[k]),
             "claim {k}"

@@ -128,6 +128,18 @@ fn check_model<M: ForcedLagrangian<N>, const N: usize>(
         for (x, y) in e.iter().zip(spec.e.iter()) {
             assert!(close(*x, *y, 1e-13), "{name}: mass_matrix");
         }
+        if M::STRUCTURE.linear {
+            // A linear claim: the general (dual-number) blocks are the same at every node.
+            if let Some(first) = out.first() {
+                let first: &NodeJacobian<N> = first;
+                let blocks = |j: &NodeJacobian<N>| [j.a, j.b, j.c, j.e];
+                for (x, y) in blocks(first).iter().zip(blocks(&gen).iter()) {
+                    for (p, r) in x.iter().zip(y.iter()) {
+                        assert!(close(*p, *r, 1e-12), "{name}: linear, but {p:e} != {r:e}");
+                    }
+                }
+            }
+        }
         if M::STRUCTURE.constant_mass {
             assert!(spec.c.iter().all(|&x| x == 0.0), "{name}: C must be zero");
             if let Some(first) = out.first() {
@@ -158,6 +170,7 @@ fn coupled_van_der_pol() {
             has_force: true,
             force_uses_velocity: true,
             constant_mass: true,
+            linear: false,
             uses_time: false,
         }
     );
@@ -175,6 +188,7 @@ fn coupled_van_der_pol() {
 fn damped_oscillator() {
     let m = DampedOscillator::DEFAULT;
     const { assert!(<DampedOscillator as ForcedLagrangian<2>>::STRUCTURE.constant_mass) };
+    const { assert!(<DampedOscillator as ForcedLagrangian<2>>::STRUCTURE.linear) };
     let blocks = check_model("DampedOscillator", &m, 2.0, 0.0);
     for j in &blocks {
         for r in 0..2 {

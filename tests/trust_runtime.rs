@@ -902,6 +902,49 @@ fn trust_false_mass_and_velocity_flags_are_refused() {
     }
 }
 
+/// `L = ½v² − ½q² − ¼q⁴` (a Duffing spring) and `F = −0.2 v`, claimed `linear`, and
+/// `L = ½v² − ½q²`, `F = −0.2 v + cos(t)` claimed `linear` without its time flag.
+struct FalseLinear<const CUBIC: bool>;
+
+impl<const CUBIC: bool> ForcedLagrangian<1> for FalseLinear<CUBIC> {
+    const STRUCTURE: forced_vi::Structure = forced_vi::Structure {
+        linear: true,
+        constant_mass: true,
+        ..forced_vi::Structure::GENERAL
+    };
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        let quartic = if CUBIC {
+            q[0].powi(4) * 0.25
+        } else {
+            q[0] * 0.0
+        };
+        (v[0] * v[0] - q[0] * q[0]) * 0.5 - quartic
+    }
+    fn force<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> [D; 1] {
+        [-v[0] * 0.2 + q[0] * 0.0]
+    }
+}
+
+/// A `linear: true` claim under a Lagrangian whose second derivatives change is refused
+/// before the first step (its steps would carry factors that are not exact and accept the
+/// first correction with them); the honest linear model runs with the claim.
+#[test]
+fn trust_a_false_linear_flag_is_refused() {
+    let init = InitialState::from_velocity([1.0], [0.5]);
+    let lobatto4 = Scheme::lobatto(4).unwrap();
+    let f = Integrator::new(&FalseLinear::<true>, lobatto4.clone(), 0.01)
+        .unwrap()
+        .final_state(init, 2.0)
+        .unwrap_err();
+    assert!(matches!(f.error, Error::InvalidModel { .. }), "{}", f.error);
+    assert_eq!(f.stats.steps, 0);
+    let ok = Integrator::new(&FalseLinear::<false>, lobatto4, 0.01)
+        .unwrap()
+        .final_state(init, 2.0)
+        .unwrap();
+    assert_eq!(ok.stats.steps, 200);
+}
+
 // ---- Adaptive runs end: a pace that cannot reach the end under the step cap stops. ----
 
 /// `L = ½v² − ½q²`, `F = v³`: from `v = 2` the velocity blows up near `t = 0.125`.

@@ -244,6 +244,60 @@ mod tests {
     }
 
     #[test]
+    fn only_polynomials_of_degree_two_and_one_are_linear() {
+        let linear = [
+            quote!(
+                coordinates(x, y),
+                lagrangian =
+                    (w * x_dot * x_dot + y_dot * y_dot) / 2 - k * (x - y) * (x - y) / 2 + w * x,
+                force(x = -k * x_dot + 0.5, y = -(k * 2.0) * y_dot - x / 4.0),
+            ),
+            quote!(coordinates(x), lagrangian = x_dot * x_dot / 2 - x * x / 2),
+            quote!(
+                coordinates(q: [f64; 3]),
+                lagrangian = q_dot[0] * q_dot[0] + q_dot[1] * q_dot[1] + q_dot[2] * q_dot[2] - q[0] * q[1],
+                force(q[i] = -k * q_dot[i]),
+            ),
+        ];
+        for m in linear {
+            let out = expand(m.clone());
+            assert!(!out.contains("compile_error"), "{out}");
+            assert!(out.contains("linear : true"), "{m}");
+        }
+        let not_linear = [
+            // A cubic potential, a velocity-dependent mass, a cubic force, a sine.
+            quote!(coordinates(x), lagrangian = x_dot * x_dot / 2 - x * x * x),
+            quote!(
+                coordinates(x),
+                lagrangian = x * x_dot * x_dot / 2 - x * x / 2
+            ),
+            quote!(
+                coordinates(x),
+                lagrangian = x_dot * x_dot / 2,
+                force(x = -x * x * x_dot)
+            ),
+            quote!(coordinates(x), lagrangian = x_dot * x_dot / 2 + x.cos()),
+            // The time, even in an additive forcing, and a condition on the coordinates.
+            quote!(
+                coordinates(x),
+                lagrangian = x_dot * x_dot / 2,
+                force(x = (w * t).cos())
+            ),
+            quote!(
+                coordinates(x),
+                lagrangian = x_dot * x_dot / 2,
+                force(x = if x > 0.0 { -x } else { x })
+            ),
+            // A constant-generic length: no polynomial is read.
+        ];
+        for m in not_linear {
+            let out = expand(m.clone());
+            assert!(!out.contains("compile_error"), "{out}");
+            assert!(out.contains("linear : false"), "{m}");
+        }
+    }
+
+    #[test]
     fn a_mass_that_depends_on_t_is_not_constant() {
         for l in [
             quote!(lagrangian = (1.0 + k * t) * x_dot * x_dot / 2 - x * x / 2),

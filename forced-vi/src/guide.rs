@@ -426,7 +426,7 @@
 //!
 //! # `STRUCTURE`
 //!
-//! [`ForcedLagrangian::STRUCTURE`] is a [`Structure`]: four flags that tell the integrator
+//! [`ForcedLagrangian::STRUCTURE`] is a [`Structure`]: five flags that tell the integrator
 //! what it may leave out. Each `false` (and `constant_mass: true`) is a promise about the
 //! model for *every* state:
 //!
@@ -435,6 +435,7 @@
 //! | `has_force: false` | `F ≡ 0` | skips the force and the work `W` |
 //! | `force_uses_velocity: false` | `∂F/∂v ≡ 0` | leaves `∂F/∂v` out of the general kernels |
 //! | `constant_mass: true` | `E = ∂²L/∂v²` constant and `C = ∂²L/∂v∂q ≡ 0` | builds the `E` part of the step Jacobian once per step size, skips `C`, solves for velocities in one linear step and skips the mass check at step ends |
+//! | `linear: true` | `L` of degree at most two and `F` of degree at most one in `(q, v)`, with constant coefficients (no `t`): `A, B, C, E` constant | keeps one factorisation through fixed steps of one size, at any number of unknowns, and accepts the first Newton correction made with it as it would a fresh one's |
 //! | `uses_time: true` | `L` or `F` depends on `t` | evaluates each node at its time and adds `∫ ∂L/∂t` to the balance |
 //!
 //! The attribute proves each claim from the expressions and claims nothing it cannot prove:
@@ -444,8 +445,10 @@
 //! step checks each promise at the initial state and beside it, and refuses a broken one
 //! with [`Error::InvalidModel`]: `uses_time: false` under an `L` or `F` that changes with
 //! `t`, `has_force: false` under a force that is not zero, `force_uses_velocity: false`
-//! under a force that changes with `v`, and `constant_mass: true` under a mass that changes
-//! or an `L` that mixes `q` and `v` (along one direction: a check, not a proof). Broken, the
+//! under a force that changes with `v`, `constant_mass: true` under a mass that changes
+//! or an `L` that mixes `q` and `v` (along one direction: a check, not a proof), and
+//! `linear: true` under second derivatives of `L` or first derivatives of `F` that change
+//! with the state or the time (along three directions, likewise). Broken, the
 //! last two left the positions unchanged but the sensitivities wrong by orders of magnitude
 //! (measured on a one-coordinate model with the mass `1 + q²`).
 //!

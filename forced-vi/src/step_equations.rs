@@ -279,6 +279,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
     fn residual_noise(&self) -> f64 {
         self.noise
     }
+
+    /// A linear model's step equations (`STRUCTURE.linear`), without constraints: the
+    /// Jacobian depends on `h` alone.
+    fn constant_jacobian(&self) -> bool {
+        M::STRUCTURE.linear && self.cons == 0
+    }
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {

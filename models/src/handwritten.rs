@@ -45,6 +45,7 @@ impl ForcedLagrangian<2> for HandCoupledVanDerPol {
         has_force: true,
         force_uses_velocity: true,
         constant_mass: true,
+        linear: false,
         uses_time: false,
     };
 

@@ -237,6 +237,7 @@ const STRUCTURE: Structure = Structure {
     has_force: true,
     force_uses_velocity: true,
     constant_mass: true,
+    linear: false,
     uses_time: false,
 };
 

@@ -74,6 +74,7 @@ impl<const N: usize> ForcedLagrangian<N> for RigidChain<N> {
         has_force: true,
         force_uses_velocity: true,
         constant_mass: true,
+        linear: false,
         uses_time: false,
     };
 

@@ -12,7 +12,7 @@ use syn::{Expr, Ident};
 use crate::ast::Model;
 use crate::ctxt::Ctxt;
 use crate::lower::{Env, Idx, Kind, Len, Lowered, Lowerer, Var, TIME};
-use crate::poly::{Atoms, Extractor, Poly};
+use crate::poly::{Atoms, Extractor, Monomial, Poly};
 
 mod force;
 mod rules;
@@ -40,6 +40,10 @@ pub struct Checked<'a> {
     /// Opaque constants used by the polynomials.
     pub atoms: Atoms,
     pub constant_mass: bool,
+    /// `L` is a polynomial of degree at most two and every force component one of degree
+    /// at most one in the coordinates and velocities (a literal number of coordinates, no
+    /// time): the node Jacobian blocks are constant.
+    pub linear: bool,
     /// The Lagrangian or the force names the time `t`.
     pub uses_time: bool,
     /// Some index of the Lagrangian or the force is checked at run time: generate
@@ -142,6 +146,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         lagrangian_terms(&env, lagrangian, &mut extractor, symbolic);
     let force = force_fns.map(|fns| checked_force(model, &env, &n, fns, &mut extractor));
     let atoms = extractor.atoms;
+    let linear = symbolic && is_linear(&poly_l, &dual_terms, force.as_ref(), extractor.n);
     let uses_time = lowered.names.contains(TIME)
         || force
             .as_ref()
@@ -161,6 +166,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         force,
         atoms,
         constant_mass,
+        linear,
         uses_time,
         checked_index,
         constraints,
@@ -295,6 +301,27 @@ fn poly_mass_is_constant(poly_l: &Poly, nn: usize) -> bool {
         }
     }
     constant_mass
+}
+
+/// Whether the model's step equations are linear with constant coefficients: every term of
+/// `L` a polynomial (`poly_l`, no `dual_terms`) of degree at most two in the coordinates
+/// and velocities, and every force component a polynomial of degree at most one (`nn`
+/// coordinates). The time is not a polynomial variable: a term that names it is neither.
+/// Coefficients are numbers and parameters, which do not change during a run.
+fn is_linear(poly_l: &Poly, dual_terms: &[Term], force: Option<&CheckedForce>, nn: usize) -> bool {
+    let degree =
+        |m: &Monomial| -> u32 { m.iter().filter(|(s, _)| *s < 2 * nn).map(|(_, e)| e).sum() };
+    // (Every slot is a coordinate or a velocity; one that were not would claim nothing.)
+    let in_range = |m: &Monomial| m.iter().all(|(s, _)| *s < 2 * nn);
+    let l_ok = dual_terms.is_empty() && poly_l.monomials().all(|m| in_range(m) && degree(m) <= 2);
+    let f_ok = force.is_none_or(|f| {
+        f.rows.iter().all(|r| {
+            r.poly
+                .as_ref()
+                .is_some_and(|p| p.monomials().all(|m| in_range(m) && degree(m) <= 1))
+        })
+    });
+    nn > 0 && l_ok && f_ok
 }
 
 /// Splits a sum at its top level (through parentheses and negation) into signed terms.

@@ -513,6 +513,7 @@ impl<'c, 'm> Gen<'c, 'm> {
         let has_force = c.force.is_some();
         let force_uses_velocity = c.force.as_ref().is_some_and(|f| f.uses_v);
         let constant_mass = c.constant_mass;
+        let linear = c.linear;
         let timed = c.uses_time;
         let names = coordinate_names(c);
         let checks = c.env.params.iter().map(|p| {
@@ -526,6 +527,7 @@ impl<'c, 'm> Gen<'c, 'm> {
                     has_force: #has_force,
                     force_uses_velocity: #force_uses_velocity,
                     constant_mass: #constant_mass,
+                    linear: #linear,
                     uses_time: #timed,
                 };
                 fn coordinate_names(&self) -> [&'static str; #n] {

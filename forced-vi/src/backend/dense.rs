@@ -341,8 +341,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         // pendulum, lobatto3–7). The error estimate's one iteration may carry them
         // ([`StepBackend::carry_factors`]).
         let carry = std::mem::take(&mut self.carry);
-        let across =
-            self.across_steps && same_h && prob.cons == 0 && self.z.len() >= ACROSS_MIN_UNKNOWNS;
+        // A linear model's factors at one step size are exact: carried at any size.
+        let across = self.across_steps
+            && same_h
+            && prob.cons == 0
+            && (self.z.len() >= ACROSS_MIN_UNKNOWNS || M::STRUCTURE.linear);
         if !(carry || across) {
             self.newton.invalidate();
         }

@@ -34,6 +34,13 @@ pub struct Structure {
     pub force_uses_velocity: bool,
     /// The mass matrix `E = ∂²L/∂v²` is constant and `C = ∂²L/∂v∂q` is zero.
     pub constant_mass: bool,
+    /// The step equations are linear with constant coefficients: `L` is a polynomial of
+    /// degree at most two and `F` one of degree at most one in `(q, v)`, neither depending
+    /// on `t`, so the node blocks `A, B, C, E` are the same at every state. Fixed steps of
+    /// one size then keep one factorisation for the whole run and accept the first Newton
+    /// correction made with it as they would a fresh one's (see
+    /// [`NewtonOptions::simplified`](crate::NewtonOptions::simplified)).
+    pub linear: bool,
     /// The model depends on time explicitly: it overrides
     /// [`ForcedLagrangian::lagrangian_at`] or [`ForcedLagrangian::force_at`]. When `false`,
     /// the integrator calls the autonomous kernels and leaves out `∂L/∂t` (a model that
@@ -47,6 +54,7 @@ impl Structure {
         has_force: true,
         force_uses_velocity: true,
         constant_mass: false,
+        linear: false,
         uses_time: false,
     };
 

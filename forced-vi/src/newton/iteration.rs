@@ -73,6 +73,10 @@ pub(crate) trait LinearSolver<S: ?Sized> {
     /// The round-off of `sys`'s residual that does not shrink with `z` (see
     /// [`super::NonlinearSystem::residual_noise`]), as of its last Jacobian.
     fn residual_noise(sys: &S) -> f64;
+    /// [`super::NonlinearSystem::constant_jacobian`] of `sys`.
+    fn constant_jacobian(_sys: &S) -> bool {
+        false
+    }
 }
 
 /// The state and buffers of the iteration, made once.
@@ -417,7 +421,11 @@ impl<V: Buffer> Iteration<V> {
             // (its contraction measured), not for a residual at the floor.
             let polished = !(far_start && it < 3)
                 || (it == 2 && small_error && rnorm <= res_tol && halvings == 0);
-            let accepted = if stale {
+            // Factors of an earlier solve of a system whose Jacobian does not change (a
+            // linear model at one step size) are exact: their iterates are judged as fresh
+            // ones'.
+            let exact = stale && L::constant_jacobian(sys);
+            let accepted = if stale && !exact {
                 it > 1 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
             } else {
                 ((small_error && rnorm <= res_tol && halvings == 0) || at_floor) && polished

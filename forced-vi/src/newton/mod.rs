@@ -44,6 +44,13 @@ pub trait NonlinearSystem {
     fn residual_noise(&self) -> f64 {
         0.0
     }
+
+    /// The Jacobian is the same at every `z` and in every solve of this system's size (a
+    /// linear model's step equations at one step size): factors made for an earlier solve
+    /// are then exact, and their first correction is accepted as a fresh one's would be.
+    fn constant_jacobian(&self) -> bool {
+        false
+    }
 }
 
 /// `h |A| |x|`, the [`NonlinearSystem::residual_noise`] of a step's equations: the forces'
@@ -135,6 +142,9 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
     #[inline(always)]
     fn residual_noise(sys: &S) -> f64 {
         sys.residual_noise()
+    }
+    fn constant_jacobian(sys: &S) -> bool {
+        sys.constant_jacobian()
     }
 }
 

@@ -23,7 +23,9 @@ pub struct NewtonOptions {
     /// The factors are kept only while the contraction rate stays below 1e-2, and those of
     /// an earlier step until the iterate's estimated error is below round-off, so the
     /// accepted iterate is as exact as full Newton's; the round-off-level error floors
-    /// depend on that.
+    /// depend on that. A model whose `STRUCTURE.linear` is true has the same Jacobian at
+    /// every step of one size: its fixed steps keep one factorisation at any number of
+    /// unknowns, and the first correction made with it is accepted as a fresh one's.
     pub simplified: bool,
 }
 

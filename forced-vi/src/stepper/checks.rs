@@ -180,7 +180,44 @@ pub(super) fn check_structure_flags<M: ForcedLagrangian<N>, const N: usize>(
             ));
         }
     }
+    if s.linear && !linear_at_both(model, (qa, va), (&beside, &moving)) {
+        return Err(invalid(
+            "the second derivatives of L or the first of F change with the state or the time, but STRUCTURE.linear is true",
+        ));
+    }
     Ok(())
+}
+
+/// The `linear` flag's check: along the directions `w = (u, u), (u, 0), (0, u)` in
+/// `(q, v)` (`u` all ones), the second derivative `wᵀ ∂²L w` and the force's derivative
+/// `∂F · w` are the same at `(t, q, v) = (0, a)` and `(0.74, b)` (hyper-dual and dual
+/// numbers: no `N × N` block is formed, whatever the model's size). Finite values only, as
+/// for the other flags.
+fn linear_at_both<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    a: (&[f64; N], &[f64; N]),
+    b: (&[f64; N], &[f64; N]),
+) -> bool {
+    use num_dual::{Dual64, HyperDual64};
+    let second = |t: f64, (qs, vs): (&[f64; N], &[f64; N]), (wq, wv): (f64, f64)| -> f64 {
+        let qd: [HyperDual64; N] = std::array::from_fn(|i| HyperDual64::new(qs[i], wq, wq, 0.0));
+        let vd: [HyperDual64; N] = std::array::from_fn(|i| HyperDual64::new(vs[i], wv, wv, 0.0));
+        model.lagrangian_at(HyperDual64::from(t), &qd, &vd).eps1eps2
+    };
+    let first = |t: f64, (qs, vs): (&[f64; N], &[f64; N]), (wq, wv): (f64, f64)| {
+        let qd: [Dual64; N] = std::array::from_fn(|i| Dual64::new(qs[i], wq));
+        let vd: [Dual64; N] = std::array::from_fn(|i| Dual64::new(vs[i], wv));
+        model.force_at(Dual64::from(t), &qd, &vd).map(|f| f.eps)
+    };
+    let same = |x: f64, y: f64| {
+        let scale = x.abs().max(y.abs());
+        !(x.is_finite() && y.is_finite()) || (x - y).abs() <= 1e-12 * scale
+    };
+    [(1.0, 1.0), (1.0, 0.0), (0.0, 1.0)].into_iter().all(|w| {
+        let (fa, fb) = (first(0.0, a, w), first(0.7390851332151607, b, w));
+        same(second(0.0, a, w), second(0.7390851332151607, b, w))
+            && fa.iter().zip(&fb).all(|(&x, &y)| same(x, y))
+    })
 }
 
 /// The model's parameter values `θ`, one per name of
