@@ -298,6 +298,16 @@
 //! −20 %, the lattice's lobatto3 at 1e-6 and 1e-8 −4 % and −5 %, its lobatto4 at 1e-8
 //! +6 %; the final errors stay below 0.2 times the tolerance, as before.
 //!
+//! *The band, for linear models.* A model whose `STRUCTURE.linear` is true has the same
+//! step Jacobian at every step of one size, and the same node blocks at every state: its
+//! adaptive steps keep their size in the same band and carry the step's factors across
+//! steps (exact, so the first correction is accepted as a fresh one's), on either backend;
+//! the estimate reads node blocks that do not change. Measured on the damped oscillator
+//! (callgrind, whole adaptive runs to T = 10, against fresh factors and no band): lobatto2
+//! at tol 1e-6 −14 %, lobatto3 at 1e-6 +6 % (359 steps instead of 285) and at 1e-9 −16 %,
+//! lobatto5 at 1e-6 and 1e-10 −4 % and −15 %, lobatto7 at 1e-8 −20 %; the final errors
+//! within a factor 3 of before, all below the tolerance.
+//!
 //! **Output times.** In a run with [`output::Samples`](crate::output::Samples), a step over
 //! the next output time ends on it, so that every output is a step's end, held to the
 //! tolerance as the others are. The controller's history stays that of the steps it chose,

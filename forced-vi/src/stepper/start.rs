@@ -54,15 +54,18 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         } = setup;
         // A model with sparse kernels, large enough for the sparse backend: the same rule on
         // either backend, so that a run takes the same steps on both.
-        let band = model.sparse_node().is_some() && N >= crate::LinearPath::SPARSE_MIN_DOF;
+        let large = model.sparse_node().is_some() && N >= crate::LinearPath::SPARSE_MIN_DOF;
         let mut reference = reference;
         if let Some(r) = reference.as_mut() {
-            r.set_costly_factors(band);
+            r.set_costly_factors(large);
         }
+        // A linear model (`STRUCTURE.linear`) has the same step Jacobian at every step of one
+        // size: its adaptive steps keep their size in the band too, and carry their factors.
+        let band = large || M::STRUCTURE.linear;
         // Fixed steps of one size reuse the step Jacobian's factors while they pay (see
         // `crate::newton`); adaptive steps, whose error estimate reads the step's node
-        // blocks, make fresh ones.
-        backend.factors_across_steps(tolerance.is_none());
+        // blocks, make fresh ones, except a linear model's, whose blocks do not change.
+        backend.factors_across_steps(tolerance.is_none() || M::STRUCTURE.linear);
         check_run(&options, t_final)?;
         options.check_step_bounds()?;
         // The step polynomial (and its node blocks, or a constrained step's multipliers)
