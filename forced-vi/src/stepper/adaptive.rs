@@ -8,7 +8,7 @@ use crate::backend::{Layout, StepBackend, StepFailure, StepView};
 
 /// The views of a step and of its reference.
 type StepViews<'a> = (StepView<'a>, StepView<'a>);
-use crate::control::{BAND, Controller, Tolerance};
+use crate::control::{Controller, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
 use crate::trajectory::StepRecord;
@@ -161,7 +161,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                             self.h_next = self.h_next.max(planned);
                             self.controller = chosen;
                         }
-                        if self.band && (BAND.0 * h..=BAND.1 * h).contains(&self.h_next) {
+                        let kept = self
+                            .band
+                            .is_some_and(|(lo, hi)| (lo * h..=hi * h).contains(&self.h_next));
+                        if kept {
                             self.h_next = h;
                         }
                         self.t = match (last, landing) {

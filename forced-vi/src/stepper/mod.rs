@@ -216,10 +216,11 @@ pub struct Stepper<'a, M, const N: usize> {
     pace: adaptive::Pace,
     /// The last accepted step's [`StepRecord::error_estimate`].
     estimate: f64,
-    /// Adaptive runs of a model whose factors cost most of a step (see
-    /// [`crate::control`]'s step-size band): a step that the controller would resize by a
-    /// factor within `crate::control::BAND` keeps its size, and so its factors.
-    band: bool,
+    /// Adaptive runs of a model whose factors cost most of a step, or a linear model's (see
+    /// [`crate::control`]'s step-size bands): a step that the controller would resize by a
+    /// factor within the band (`crate::control::BAND` or `LINEAR_BAND`) keeps its size, and
+    /// so its factors.
+    band: Option<(f64, f64)>,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).

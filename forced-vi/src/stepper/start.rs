@@ -8,7 +8,7 @@ use super::checks::{
 use super::state::State;
 use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
 use crate::backend::{Backend, StepBackend};
-use crate::control::Controller;
+use crate::control::{BAND, Controller, LINEAR_BAND};
 use crate::error::Error;
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
@@ -61,7 +61,13 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         }
         // A linear model (`STRUCTURE.linear`) has the same step Jacobian at every step of one
         // size: its adaptive steps keep their size in the band too, and carry their factors.
-        let band = large || M::STRUCTURE.linear;
+        let band = if large {
+            Some(BAND)
+        } else if M::STRUCTURE.linear {
+            Some(LINEAR_BAND)
+        } else {
+            None
+        };
         // Fixed steps of one size reuse the step Jacobian's factors while they pay (see
         // `crate::newton`); adaptive steps, whose error estimate reads the step's node
         // blocks, make fresh ones, except a linear model's, whose blocks do not change.
