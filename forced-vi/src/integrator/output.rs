@@ -377,8 +377,8 @@ fn open<M: ForcedLagrangian<N>, const N: usize, R>(
 fn to_the_end<M: ForcedLagrangian<N>, const N: usize>(
     stepper: &mut Stepper<'_, M, N>,
 ) -> Result<FinalState<N>, RunFailure<N>> {
-    while let Some(rec) = stepper.next() {
-        if let Err(e) = rec {
+    while let Some(step) = stepper.advance_quietly() {
+        if let Err(e) = step {
             return Err(stepper.failure(e));
         }
     }

@@ -2,7 +2,7 @@
 //! reference scheme, the controller's decision, and the automatic first step. The estimate
 //! and the controller are derived in [`crate::control`]. The same on every backend.
 
-use super::Stepper;
+use super::{Stepped, Stepper};
 use super::checks::step_count;
 use crate::backend::{Layout, StepBackend, StepFailure, StepView};
 
@@ -11,7 +11,6 @@ type StepViews<'a> = (StepView<'a>, StepView<'a>);
 use crate::control::{Controller, Tolerance};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
-use crate::trajectory::StepRecord;
 
 /// The accumulated round-off, in units of the tolerance, past which a run stops (see
 /// [`crate::control`]).
@@ -46,7 +45,7 @@ const NEGLIGIBLE: f64 = 0.01;
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// One adaptive step from `t`: accepted when the estimated error per unit step is at
     /// most one, retried with a smaller step otherwise (see [`crate::control`]).
-    pub(super) fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<StepRecord<N>, Error> {
+    pub(super) fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<Stepped, Error> {
         let t0 = self.t;
         self.saved.copy_from(&self.state);
         let span = self.t_final;

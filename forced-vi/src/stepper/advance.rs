@@ -2,7 +2,7 @@
 //! and of the ledger, the mass check at the step's end, and the subdivision of a step that
 //! fails.
 
-use super::Stepper;
+use super::{Stepped, Stepper};
 use super::checks::{newton_error, record_error};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
@@ -204,7 +204,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// Advances over `[t_k, t_{k+1}]`, subdividing on failure if allowed.
-    pub(super) fn step(&mut self) -> Result<StepRecord<N>, Error> {
+    pub(super) fn step(&mut self) -> Result<Stepped, Error> {
         let t0 = self.time_of(self.k);
         let h = self.time_of(self.k + 1) - t0;
         let mut iters = 0;
@@ -276,28 +276,41 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         Err(self.failure_error(last_failure, t0))
     }
 
-    /// Completes an accepted step that ends at `self.t`: the velocity solve, the totals and
-    /// the record, every field of which must be finite.
+    /// Completes an accepted step that ends at `self.t`: the step count and the totals.
+    /// Its record, if the run keeps one, is made by [`Self::emit`].
     pub(super) fn finish_step(
         &mut self,
         iters: usize,
         residual: f64,
         substeps: usize,
-    ) -> Result<StepRecord<N>, Error> {
+    ) -> Result<Stepped, Error> {
         self.k += 1;
-        let t = self.t;
         // Substeps add up to the step only to round-off: the step's end is exact.
-        self.state.t_state = t;
+        self.state.t_state = self.t;
         self.stats.count_step(iters);
+        Ok(Stepped {
+            iters,
+            residual,
+            substeps,
+        })
+    }
+
+    /// The record of a step just finished: in a lean run the state only (the velocity,
+    /// energy and balance are left out, and checked once at the end, `finish`); else with
+    /// the velocity solve and the diagnostics, every field of which must be finite.
+    pub(super) fn emit(&mut self, done: Stepped) -> Result<StepRecord<N>, Error> {
+        let Stepped {
+            iters,
+            residual,
+            substeps,
+        } = done;
         if self.lean {
-            // The state only; the velocity, energy and balance are left out (and checked
-            // once at the end, `finish`).
             return Ok(self.record(iters, residual, substeps, false));
         }
         self.solve_velocity()?;
         let rec = self.record(iters, residual, substeps, true);
         let size = || rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
-        if let Some(error) = record_error(&rec, size, self.k, t) {
+        if let Some(error) = record_error(&rec, size, self.k, self.t) {
             return Err(error);
         }
         Ok(rec)

@@ -378,16 +378,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 }
 
-impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
-    type Item = Result<StepRecord<N>, Error>;
+/// What an accepted step took: its linear solves, its last residual and its substeps.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Stepped {
+    iters: usize,
+    residual: f64,
+    substeps: usize,
+}
 
-    fn next(&mut self) -> Option<Self::Item> {
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// The next step of the run, if any, without its record: `Some(Ok(()))` after a step
+    /// (or at the start), `None` at the end. A run that keeps only its final state steps
+    /// with this, and makes the one record it needs at the end ([`Stepper::finish`]).
+    pub(crate) fn advance_quietly(&mut self) -> Option<Result<(), Error>> {
+        self.next_step().map(|out| out.map(|_| ()))
+    }
+
+    fn next_step(&mut self) -> Option<Result<Option<Stepped>, Error>> {
         if self.done {
             return None;
         }
         if !self.started {
             self.started = true;
-            return Some(with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))));
+            return Some(Ok(None));
         }
         if self.k >= self.n_steps && self.tolerance.is_none() {
             self.done = true;
@@ -402,6 +415,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
                 return None;
             }
             None => with_stack(self.stack, || self.step()),
+        };
+        if out.is_err() {
+            self.done = true;
+        }
+        Some(out.map(Some))
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
+    type Item = Result<StepRecord<N>, Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let out = match self.next_step()? {
+            Ok(Some(done)) => with_stack(self.stack, || self.emit(done)),
+            Ok(None) => with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))),
+            Err(e) => Err(e),
         };
         if out.is_err() {
             self.done = true;
