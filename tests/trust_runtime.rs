@@ -1279,6 +1279,12 @@ struct Kick {
 /// Without it, each of these runs ended in `StepSizeTooSmall` at the kick, with steps of
 /// 2e-12 to 4e-12 (the same kick at `tc = 0.5` was `Ok`). Reference:
 /// `scripts/kick_reference.py` (Duhamel's integral, 40 digits).
+///
+/// lobatto5 at 1e-12 over these 1000 time units is at the edge of f64: with the
+/// controller's steady error at 0.06 it ended `Ok` 2.6 times the tolerance off; with it at
+/// 0.25 (`forced_vi::control`, "The steady error") it ends in `ToleranceBelowRoundOff` at
+/// t ≈ 924, before the kick. Either is allowed there; a step size that collapses at the
+/// kick, or a wrong `Ok`, is not. lobatto6 at 1e-12 goes through the kick `Ok`.
 #[test]
 fn trust_a_force_steep_in_time_late_in_a_run_ends_ok() {
     let m = Kick {
@@ -1288,11 +1294,24 @@ fn trust_a_force_steep_in_time_late_in_a_run_ends_ok() {
     };
     let (x_ref, v_ref) = (-1.650_658_315_501_302, 0.444_018_369_564_837_5);
     let init = InitialState::from_velocity([1.0], [0.0]);
-    for (s, tol) in [(3, 1e-10), (5, 1e-10), (5, 1e-11), (5, 1e-12)] {
-        let end = Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol)
+    let runs = [
+        (3, 1e-10, true),
+        (5, 1e-10, true),
+        (5, 1e-11, true),
+        (5, 1e-12, false),
+        (6, 1e-12, true),
+    ];
+    for (s, tol, must_end_ok) in runs {
+        let end = match Integrator::adaptive(&m, Scheme::lobatto(s).unwrap(), tol, tol)
             .unwrap()
             .final_state(init, 1001.5)
-            .unwrap_or_else(|f| panic!("lobatto{s} at {tol:e}: {}", f.error));
+        {
+            Ok(end) => end,
+            Err(f) if !must_end_ok && matches!(f.error, Error::ToleranceBelowRoundOff { .. }) => {
+                continue;
+            }
+            Err(f) => panic!("lobatto{s} at {tol:e}: {}", f.error),
+        };
         let err = (end.q[0] - x_ref).abs().max((end.v[0] - v_ref).abs());
         assert!(
             err <= 10.0 * tol * (1.0 + x_ref.abs()),

@@ -2,8 +2,8 @@
 //! reference scheme, the controller's decision, and the automatic first step. The estimate
 //! and the controller are derived in [`crate::control`]. The same on every backend.
 
-use super::{Stepped, Stepper};
 use super::checks::step_count;
+use super::{Stepped, Stepper};
 use crate::backend::{Layout, StepBackend, StepFailure, StepView};
 
 /// The views of a step and of its reference.

@@ -2,8 +2,8 @@
 //! and of the ledger, the mass check at the step's end, and the subdivision of a step that
 //! fails.
 
-use super::{Stepped, Stepper};
 use super::checks::{newton_error, record_error};
+use super::{Stepped, Stepper};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
 use crate::model::ForcedLagrangian;
