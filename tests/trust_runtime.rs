@@ -1057,7 +1057,7 @@ struct Pulse {
 /// The documented limit of error control and its two remedies (README, "What an `Ok`
 /// promises"). Neither a step nor its estimate sees a force that acts only between their
 /// nodes: from x = 1 at rest, with a pulse of width 1e-3 at t = 0.5, adaptive lobatto5 at
-/// tol 1e-8 takes 8 steps to t = 3 and ends `Ok`, the pulse missed (error 1.06). A largest
+/// tol 1e-8 takes 6 steps to t = 3 and ends `Ok`, the pulse missed (error 1.06). A largest
 /// step of the pulse's width, or an output time at it (a step then ends there and samples
 /// it), keeps every run within the tolerance.
 #[test]
