@@ -279,6 +279,11 @@
 //! - the floor alone, without the faster growth, took the ensemble's lobatto5 slope in
 //!   `tests/adaptive.rs` from 0.91 to 0.79, over runs of 5 to 14 steps.
 //!
+//! `cargo run --release --example tolerance_sweep` runs those nine models with lobatto3–7
+//! and `auto` on each (54 sweeps, tol 1e-3 to 1e-12). Measured with this controller: one
+//! slope outside 0.8–1.2 (Duffing lobatto6, 1.24), a mean distance from 1 of 0.059, and a
+//! largest final error of 0.50 times the tolerance.
+//!
 //! *The history term* `‖e_prev‖` is floored at 1e-4 (Hairer's `facold`). Unfloored, an
 //! error far below the tolerance, as on the first steps after the cautious first step,
 //! made the next step grow by 2.2 instead of 5: on the 1024-coordinate chain (adaptive

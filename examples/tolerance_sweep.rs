@@ -1,0 +1,229 @@
+//! Tolerance proportionality on models the controller was not tuned on:
+//! `cargo run --release --example tolerance_sweep`.
+//!
+//! Nine small forced models (none of them a report scene), each run adaptively with
+//! lobatto3–7 and with `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12. The
+//! final error in `q` (max-norm) is taken against fixed-step lobatto7 at `h = 2e-3`, checked
+//! against lobatto6 at `h = 1e-3`. A sweep's slope is the least-squares slope of
+//! log(error) against log(tol) over its runs of at least 4 steps whose error is above
+//! `1e-13 · max(1, |q_ref|)`, as in the report. The last lines count the slopes outside
+//! 0.8–1.2 (issue 23's target) and give the largest final error over its tolerance.
+use forced_vi::prelude::*;
+
+/// A pendulum with linear drag.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot + x.cos(),
+    force(x = -0.3 * x_dot)
+)]
+struct Pendulum {}
+
+/// A driven, damped hardening Duffing oscillator (not chaotic at this forcing).
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x - 0.25 * x * x * x * x,
+    force(x = -0.2 * x_dot + 0.5 * (1.2 * t).cos())
+)]
+struct Duffing {}
+
+/// A van der Pol oscillator, μ = 3.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = 3.0 * (1.0 - x * x) * x_dot)
+)]
+struct VanDerPol {}
+
+/// Hénon–Heiles with weak drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 0.5 * (x * x + y * y) - x * x * y
+        + y * y * y / 3.0,
+    force(x = -0.05 * x_dot, y = -0.05 * y_dot)
+)]
+struct HenonHeiles {}
+
+/// An elastic pendulum in polar coordinates with drag.
+#[forced_lagrangian(
+    coordinates(r, th),
+    lagrangian = 0.5 * (r_dot * r_dot + r * r * th_dot * th_dot) + 9.81 * r * th.cos()
+        - 20.0 * (r - 1.0) * (r - 1.0),
+    force(r = -0.1 * r_dot, th = -0.1 * th_dot)
+)]
+struct Elastic {}
+
+/// A charge in a uniform magnetic field and a harmonic trap, with drag (a gyroscopic term).
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + (x * y_dot - y * x_dot)
+        - 0.25 * (x * x + y * y),
+    force(x = -0.1 * x_dot, y = -0.1 * y_dot)
+)]
+struct Magnetic {}
+
+/// A periodic Toda lattice of three particles with drag.
+#[forced_lagrangian(
+    coordinates(a, b, c),
+    lagrangian = 0.5 * (a_dot * a_dot + b_dot * b_dot + c_dot * c_dot)
+        - (a - b).exp()
+        - (b - c).exp()
+        - (c - a).exp(),
+    force(a = -0.05 * a_dot, b = -0.05 * b_dot, c = -0.05 * c_dot)
+)]
+struct Toda {}
+
+/// A pendulum driven by a periodic torque.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot + 4.0 * x.cos(),
+    force(x = -0.1 * x_dot + 1.5 * (0.7 * t).sin())
+)]
+struct DrivenPendulum {}
+
+/// Two coupled nonlinear springs with quadratic drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot)
+        - 0.5 * (x * x + 4.0 * y * y)
+        - 0.3 * x * x * y * y,
+    force(
+        x = -0.2 * x_dot * (x_dot * x_dot + y_dot * y_dot).sqrt(),
+        y = -0.2 * y_dot * (x_dot * x_dot + y_dot * y_dot + 1e-3).sqrt()
+    )
+)]
+struct QuadraticDrag {}
+
+/// One sweep's summary.
+struct Sweep {
+    slope: Option<f64>,
+    worst: f64,
+}
+
+/// The least-squares slope of `ln y` against `ln x`.
+fn slope(pts: &[(f64, f64)]) -> Option<f64> {
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let mx = pts.iter().map(|p| p.0.ln()).sum::<f64>() / n;
+    let my = pts.iter().map(|p| p.1.ln()).sum::<f64>() / n;
+    let sxy: f64 = pts.iter().map(|p| (p.0.ln() - mx) * (p.1.ln() - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0.ln() - mx).powi(2)).sum();
+    Some(sxy / sxx)
+}
+
+fn max_diff<const N: usize>(a: &[f64], b: &[f64]) -> f64 {
+    (0..N).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max)
+}
+
+fn sweep_model<M: ForcedLagrangian<N>, const N: usize>(
+    name: &str,
+    model: &M,
+    init: InitialState<N>,
+    t_final: f64,
+    out: &mut Vec<Sweep>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let reference = Integrator::new(model, Scheme::lobatto(7)?, 2e-3)?
+        .final_state(init, t_final)
+        .map_err(|f| f.error)?;
+    let check = Integrator::new(model, Scheme::lobatto(6)?, 1e-3)?
+        .final_state(init, t_final)
+        .map_err(|f| f.error)?;
+    let scale = reference.q.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+    let agree = max_diff::<N>(reference.q.as_slice(), check.q.as_slice());
+    println!("{name}: T = {t_final}, reference checked to {agree:.1e}");
+    for s in (3..=8).map(|s| if s == 8 { None } else { Some(s) }) {
+        let (mut pts, mut worst, mut steps, mut rejected) = (Vec::new(), 0.0f64, 0, 0);
+        let mut line = String::new();
+        for k in 3..=12 {
+            let tol = 10f64.powi(-k);
+            let integ = match s {
+                Some(s) => Integrator::adaptive(model, Scheme::lobatto(s)?, tol, tol)?,
+                None => Integrator::auto(model, tol, tol)?,
+            };
+            match integ.final_state(init, t_final) {
+                Ok(end) => {
+                    let err = max_diff::<N>(end.q.as_slice(), reference.q.as_slice());
+                    worst = worst.max(err / tol / scale);
+                    steps += end.stats.steps;
+                    rejected += end.stats.rejected_steps;
+                    if end.stats.steps >= 4 && err > 1e-13 * scale {
+                        pts.push((tol, err));
+                    }
+                    line += &format!(" {:.0e}", err / tol);
+                }
+                Err(f) => line += &format!(" [{}]", f.error),
+            }
+        }
+        let k = slope(&pts);
+        let label = s.map_or("auto".to_string(), |s| format!("lobatto{s}"));
+        println!(
+            "  {label:9} slope {} over {} runs, worst err/tol {worst:.2}, {steps} steps, {rejected} rejected; err/tol:{line}",
+            k.map_or("–".into(), |k| format!("{k:.2}")),
+            pts.len(),
+        );
+        out.push(Sweep { slope: k, worst });
+    }
+    Ok(())
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut all = Vec::new();
+    sweep_model(
+        "pendulum",
+        &Pendulum {},
+        InitialState::from_velocity([2.0], [0.0]),
+        10.0,
+        &mut all,
+    )?;
+    sweep_model(
+        "duffing",
+        &Duffing {},
+        InitialState::from_velocity([1.0], [0.0]),
+        10.0,
+        &mut all,
+    )?;
+    sweep_model(
+        "van_der_pol",
+        &VanDerPol {},
+        InitialState::from_velocity([2.0], [0.0]),
+        10.0,
+        &mut all,
+    )?;
+    let hh = InitialState::from_velocity([0.3, 0.1], [0.0, 0.35]);
+    sweep_model("henon_heiles", &HenonHeiles {}, hh, 10.0, &mut all)?;
+    sweep_model(
+        "elastic",
+        &Elastic {},
+        InitialState::from_velocity([1.2, 0.8], [0.0, 0.0]),
+        10.0,
+        &mut all,
+    )?;
+    sweep_model(
+        "magnetic",
+        &Magnetic {},
+        InitialState::from_velocity([1.0, 0.0], [0.0, 0.5]),
+        10.0,
+        &mut all,
+    )?;
+    let toda = InitialState::from_velocity([0.0, 0.5, -0.3], [0.8, -0.2, 0.1]);
+    sweep_model("toda", &Toda {}, toda, 10.0, &mut all)?;
+    sweep_model(
+        "driven_pendulum",
+        &DrivenPendulum {},
+        InitialState::from_velocity([0.5], [0.0]),
+        15.0,
+        &mut all,
+    )?;
+    let drag = InitialState::from_velocity([1.0, 0.5], [0.3, 0.0]);
+    sweep_model("quadratic_drag", &QuadraticDrag {}, drag, 10.0, &mut all)?;
+    let slopes: Vec<f64> = all.iter().filter_map(|s| s.slope).collect();
+    let outside = slopes.iter().filter(|k| !(0.8..=1.2).contains(*k)).count();
+    let mean = slopes.iter().map(|k| (k - 1.0).abs()).sum::<f64>() / slopes.len().max(1) as f64;
+    let worst = all.iter().map(|s| s.worst).fold(0.0, f64::max);
+    println!(
+        "{} sweeps: {outside} slopes outside 0.8–1.2, mean |slope − 1| {mean:.3}; largest final error {worst:.2} tol (relative to max(1, |q_ref|))",
+        slopes.len()
+    );
+    Ok(())
+}
