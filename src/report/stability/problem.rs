@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use forced_vi::{output, ForcedLagrangian, InitialState, Integrator, Scheme, SchemeId, Stepper};
 
-use super::rows::{BaselineRow, Outcome, Row, MAX_SUBDIVISIONS};
+use super::rows::{BaselineRow, Outcome, Row, HIGHER_ORDER_MAX_STEPS, MAX_SUBDIVISIONS};
 use crate::baselines::{self, Baseline, OdeSystem};
 use crate::reference::Reference;
 use crate::report::timing::timed;
@@ -108,6 +108,9 @@ impl<M: ForcedLagrangian<N> + Sync, const N: usize> Problem<M, N> {
     ) -> Result<Integrator<'_, M, N>, forced_vi::Error> {
         let integ = Integrator::new(&self.model, Scheme::new(id)?, h_model)?;
         match tol {
+            Some(t) if matches!(id, SchemeId::Lobatto(s) if s >= 5) => integ
+                .tolerances(t, t)
+                .map(|i| i.max_steps(HIGHER_ORDER_MAX_STEPS)),
             Some(t) => integ.tolerances(t, t),
             None => Ok(integ.max_subdivisions(MAX_SUBDIVISIONS)),
         }
@@ -287,34 +290,6 @@ pub(super) fn fine_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
         (Some(a), None) => (
             a,
             format!("lobatto5 at h = {h_model:e} (no cross-check)"),
-            f64::NAN,
-        ),
-        _ => (
-            vec![f64::NAN; N],
-            "reference run failed".to_string(),
-            f64::NAN,
-        ),
-    }
-}
-
-/// A baseline reference (`solver` at `tol`), cross-checked against `check` at `check_tol`.
-pub(super) fn baseline_reference<M: ForcedLagrangian<N> + Sync, const N: usize>(
-    p: &Problem<M, N>,
-    (solver, tol): (Baseline, f64),
-    (check, check_tol): (Baseline, f64),
-) -> (Vec<f64>, String, f64) {
-    match (p.baseline_q(solver, tol), p.baseline_q(check, check_tol)) {
-        (Ok((a, _)), Ok((b, _))) => {
-            let d = q_error(&a, &b);
-            (
-                a,
-                format!("{solver} at tol {tol:e} ({check} at {check_tol:e} differs by {d:.1e})"),
-                d.max(1e-15),
-            )
-        }
-        (Ok((a, _)), Err(_)) => (
-            a,
-            format!("{solver} at tol {tol:e} (no cross-check)"),
             f64::NAN,
         ),
         _ => (

@@ -155,7 +155,7 @@ fn runs(s: &Summary, cases: &[&dyn Case]) -> String {
 struct Comparison {
     scene: &'static str,
     target: f64,
-    cells: [String; 4],
+    cells: [String; 5],
 }
 
 /// Who was faster, counted over the measurable (scene, target) pairs.
@@ -205,16 +205,31 @@ fn compare(s: &Summary, c: &dyn Case, target: f64, wins: &mut Wins) -> Compariso
         return Comparison {
             scene: c.name(),
             target,
-            cells: [note, String::new(), String::new(), String::new()],
+            cells: [
+                note,
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+            ],
         };
     }
     wins.pairs += 1;
     let v = best_variational(&s.rows, c.name(), target);
+    let a = best_variational(&s.adaptive, c.name(), target);
     let b = best_baseline(&s.baselines, c.name(), Baseline::Bdf, target);
     let e = best_baseline(&s.baselines, c.name(), Baseline::Esdirk34, target);
     let vs = v.map_or("—".to_string(), |r| {
         format!("{} h={:.1e}: {:.2e} s", r.method, r.h, r.seconds)
     });
+    let as_ = a.map_or("—".to_string(), |r| {
+        let tol = r.tol.unwrap_or(f64::NAN);
+        format!("{} tol {tol:.0e}: {:.2e} s", r.method, r.seconds)
+    });
+    let v = [v, a]
+        .into_iter()
+        .flatten()
+        .min_by(|x, y| x.seconds.total_cmp(&y.seconds));
     let bs = |x: Option<&BaselineRow>| {
         x.map_or("—".to_string(), |r| {
             format!("{:.0e}: {:.2e} s", r.tol, r.seconds)
@@ -227,7 +242,7 @@ fn compare(s: &Summary, c: &dyn Case, target: f64, wins: &mut Wins) -> Compariso
     Comparison {
         scene: c.name(),
         target,
-        cells: [vs, bs(b), bs(e), faster(v, best, wins)],
+        cells: [vs, as_, bs(b), bs(e), faster(v, best, wins)],
     }
 }
 
@@ -241,8 +256,9 @@ fn against_baselines(s: &Summary, planned: &[&Planned], cases: &[&dyn Case]) -> 
          The same scenes with diffsol's BDF and ESDIRK34 (`rtol = atol = tol`, Jacobian by \
          forward differences) over tolerances {tols}. For each error target the table gives the \
          cheapest measured run, by wall time, whose final position error is at most the \
-         target (variational: over all schemes and step sizes above; `—`: no run reached \
-         it). Times are single runs on a shared two-core machine, with another case running \
+         target (variational: over all schemes and step sizes above, and apart over the \
+         adaptive runs; `—`: no run reached it). The verdict takes the faster of the two \
+         variational runs. Times are single runs on a shared two-core machine, with another case running \
          alongside: read ratios below about 2 as ties.\n\n"
     );
     let mut wins = Wins::default();
@@ -258,9 +274,10 @@ fn against_baselines(s: &Summary, planned: &[&Planned], cases: &[&dyn Case]) -> 
             col("scene", |c: &Comparison| format!("`{}`", c.scene)),
             col("target", |c: &Comparison| format!("{:.0e}", c.target)),
             col("variational: best (method, h, s)", cell(0)),
-            col("bdf (tol, s)", cell(1)),
-            col("esdirk34 (tol, s)", cell(2)),
-            col("faster", cell(3)),
+            col("adaptive: best (method, tol, s)", cell(1)),
+            col("bdf (tol, s)", cell(2)),
+            col("esdirk34 (tol, s)", cell(3)),
+            col("faster", cell(4)),
         ],
     ));
     let _ = writeln!(
@@ -298,34 +315,41 @@ quadrature the Galerkin schemes are of partitioned Lobatto IIIA–IIIB type (lob
 Störmer–Verlet), so on the stiff chain lobatto2 and lobatto3 blow up for hω from about 3 to \
 300 (`failed:non_finite_model`, `failed:newton_singular_jacobian`) and at hω ≈ 1000 finish \
 their single step `ok` but wrong (|q| ≈ 2·10³ from 0.02). The midpoint rule stays bounded at \
-every hω, and it is the one place where forced-vi clearly wins against the stiff baselines: \
-at hω ≈ 30 it reaches an error of 1e-2 about 30 times faster than BDF. For errors of 1e-4 \
-and below on the chain, BDF is about 4 times faster than the best variational run. None of \
-these schemes is L-stable: they do not damp what they do not resolve.\n\
-- **Relaxation jumps are where forced-vi loses.** On `stiff_van_der_pol` (μ = 10³) no scheme \
+every hω, and at hω ≈ 30 it reaches an error of 1e-2 about 30 to 40 times faster than BDF. \
+For errors of 1e-4 and below on the chain, lobatto4 with fixed steps takes 0.4 to 0.6 times \
+BDF's time (two runs), and ESDIRK34 does not reach 1e-8. None of these schemes is L-stable: \
+they do not damp what they do not resolve.\n\
+- **Relaxation jumps need adaptive steps.** On `stiff_van_der_pol` (μ = 10³) no fixed step \
 gets through the first jump with h ≥ 0.2, even with 64 substeps; from h = 0.1 down to about \
 2e-3 the runs finish (mostly after subdivision) but the jump lands at the wrong time and the \
-final error is O(1) (`wrong` above). Accurate results need h ≤ 5e-4 (4·10⁶ steps and more), \
-and BDF reaches the same errors (1e-2 to 1e-6) about 7·10³ to 10⁴ times faster. The variational schemes only reach \
-errors (≈ 1e-9 with lobatto4 at h = 1e-4, 2·10⁷ steps) that BDF does not reach at any \
-tolerance it accepts.\n\
-- **Hairer's scaled form with μ = 10⁶ is out of reach.** No variational run finishes with a \
-useful answer. With fixed steps, lobatto2 finishes every run with an error of 0.16 to 16 in x \
-(whose amplitude is 2); lobatto3, lobatto4 and the midpoint rule stop with \
-`newton_max_iterations` at the first relaxation jump (from h = 0.2 down, their steps done \
-times h is about 0.8, the jump's τ), where even 64 substeps are 10⁶ to 10¹⁰ times the jump's \
-time scale (about 1/μ in t): these Newton solves do not converge (final residuals from 0.1 to 1e23, checked at \
-h = 0.1 to 1e-4). The adaptive runs end in `step_size_too_small` (or the Newton failure of \
-their last attempt) for another reason: error control per unit step (see Adaptive runs) gives \
-a step of size h the budget tol·h/T of the local error, and here T = 2·10⁶ in t while the \
-initial layer (from x' = 0, off the slow manifold) and the jump need h ≈ 10⁻⁸: a budget of \
-10⁻¹⁵ relative or less, the round-off of the state. The steps shrink until they reach the \
-floor 16ε·t (3·10⁻⁹ at the jump's t ≈ 8·10⁵); traced on lobatto4 at tol 1e-1: 1642 steps, \
-through the jump at h ≈ 10⁻⁸, then `step_size_too_small` at t = 806852.8. BDF succeeds \
-at tol ≤ 1e-5 and ESDIRK34 only at tol ≤ 1e-8.\n\
+final error is O(1) (`wrong` above). Accurate fixed-step results need h ≤ 5e-4 (4·10⁶ steps \
+and more), thousands of times BDF's cost. Adaptive steps close that gap (Stiff cost above, \
+timed again): lobatto4 at tol 1e-1 takes 224 steps and ends 8.7e-8 off, about 2.4 times \
+BDF's time to an error of 1e-3, the same time to 1e-5 and less than half of it to 1e-7; \
+lobatto6 at tol 1e-2 ends below 1e-8, which neither baseline reaches at any tolerance it \
+accepts.\n\
+- **Hairer's scaled form with μ = 10⁶ takes lobatto5 and above, adaptively.** With fixed \
+steps no variational run finishes with a useful answer: lobatto2 finishes every run with an \
+error of 0.16 to 16 in x (whose amplitude is 2); lobatto3, lobatto4 and the midpoint rule \
+stop with `newton_max_iterations` at the first relaxation jump (from h = 0.2 down, their \
+steps done times h is about 0.8, the jump's τ), where even 64 substeps are 10⁶ to 10¹⁰ times \
+the jump's time scale (about 1/μ in t): these Newton solves do not converge (final residuals \
+from 0.1 to 1e23, checked at h = 0.1 to 1e-4). Adaptive lobatto2–4 and the midpoint rule end \
+in `step_size_too_small` (or the Newton failure of their last attempt): error control per \
+unit step (see Adaptive runs) gives a step of size h the budget tol·h/T of the local error, \
+with T = 2·10⁶ in t, and lobatto4's steps shrink at the jump to the floor 16ε·t (traced at \
+tol 1e-1: 3035 steps, the last of 7·10⁻⁹ at t = 806852.8). The higher orders pass the jump \
+with larger steps (lobatto6 at tol 1e-1: none below 1.2·10⁻⁷) and finish `Ok`: lobatto6 at \
+every tolerance from 1e-1 to 1e-8 (427 to 24861 steps), lobatto7 from 1e-1 to 1e-6 and \
+lobatto5 from 1e-1 to 1e-4, 6e-14 to 1.4e-9 off the reference (scipy Radau at 3e-11 on the \
+scaled form, which Radau at 1e-10 matches to 2.5e-14). Below those tolerances lobatto5 and \
+lobatto7 end at this report's cap of 10⁶ steps (`max_steps_reached`; lobatto5 at 1e-8, run \
+without the cap, ends `Ok` after 3.2·10⁸ steps, 330 s), and lobatto5 at 1e-5 in \
+`step_size_too_small`. BDF succeeds at tol ≤ 1e-5 and ESDIRK34 only at tol ≤ 1e-8; \
+lobatto6 reaches an error of 1e-6 in about BDF's time and 1e-8, which neither reaches.\n\
 - **Mildly stiff problems are a draw.** On the over-damped oscillator (ζ = 100, hλ up to 200) \
 and on the coupled van der Pol with amplitudes ×100 every run is `ok` at every h from 1 to \
-5e-5, and the cheapest run to a given error is within a factor of about 3 of the stiff \
+5e-5, and the cheapest run to a given error is within a factor of about 4 of the stiff \
 baselines either way; these runs take microseconds to milliseconds, so timing noise matters.\n\
 - **`ok` is not `accurate`.** The runtime sees finite values and a converged Newton solve; \
 it cannot see a run that is stable but wrong. The `wrong` column and `err_final` do. Where the \
