@@ -97,6 +97,9 @@ struct QuadraticDrag {}
 struct Sweep {
     slope: Option<f64>,
     worst: f64,
+    /// Accepted and rejected steps over the sweep's runs.
+    steps: usize,
+    rejected: usize,
 }
 
 /// The least-squares slope of `ln y` against `ln x`.
@@ -162,7 +165,12 @@ fn sweep_model<M: ForcedLagrangian<N>, const N: usize>(
             k.map_or("–".into(), |k| format!("{k:.2}")),
             pts.len(),
         );
-        out.push(Sweep { slope: k, worst });
+        out.push(Sweep {
+            slope: k,
+            worst,
+            steps,
+            rejected,
+        });
     }
     Ok(())
 }
@@ -221,8 +229,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let outside = slopes.iter().filter(|k| !(0.8..=1.2).contains(*k)).count();
     let mean = slopes.iter().map(|k| (k - 1.0).abs()).sum::<f64>() / slopes.len().max(1) as f64;
     let worst = all.iter().map(|s| s.worst).fold(0.0, f64::max);
+    let steps: usize = all.iter().map(|s| s.steps).sum();
+    let rejected: usize = all.iter().map(|s| s.rejected).sum();
     println!(
-        "{} sweeps: {outside} slopes outside 0.8–1.2, mean |slope − 1| {mean:.3}; largest final error {worst:.2} tol (relative to max(1, |q_ref|))",
+        "{} sweeps: {outside} slopes outside 0.8–1.2, mean |slope − 1| {mean:.3}; largest final error {worst:.2} tol (relative to max(1, |q_ref|)); {steps} steps and {rejected} rejected in all",
         slopes.len()
     );
     Ok(())
