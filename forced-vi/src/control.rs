@@ -535,6 +535,9 @@ pub(crate) struct Controller {
     /// The factor on an accepted step's PI prediction: [`Self::SAFETY`], or more for a
     /// high order, so that the steady error is at least [`Self::STEADY_FLOOR`].
     safety: f64,
+    /// The error that accepted steps settle at, `safety^{p / 0.3}` (see the module docs,
+    /// "The steady error").
+    steady: f64,
     err_prev: f64,
     rejected: bool,
     /// The error of the last rejected step, while rejections follow each other.
@@ -575,9 +578,11 @@ impl Controller {
 
     pub(crate) fn new(order: usize) -> Self {
         let order = order.max(1) as f64;
+        let safety = Self::SAFETY.max(Self::STEADY_FLOOR.powf(0.3 / order));
         Controller {
             order,
-            safety: Self::SAFETY.max(Self::STEADY_FLOOR.powf(0.3 / order)),
+            safety,
+            steady: safety.powf(order / 0.3),
             err_prev: 1.0,
             rejected: false,
             err_rejected: f64::INFINITY,
@@ -592,7 +597,7 @@ impl Controller {
             self.safety * err.powf(-0.7 / self.order) * self.err_prev.powf(0.4 / self.order);
         // Far below the steady error (see the module docs, "The steady error"), the step
         // grows at once to where that error is predicted, with a margin.
-        let steady = self.safety.powf(self.order / 0.3);
+        let steady = self.steady;
         if err < Self::FAR_BELOW * steady {
             fac = fac.max(0.9 * self.safety * (steady / err).powf(1.0 / self.order));
         }

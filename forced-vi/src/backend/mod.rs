@@ -90,6 +90,12 @@ impl Layout {
     pub(crate) fn at(&self, m: usize, a: usize) -> usize {
         a * self.coordinate + (m - 1) * self.stage
     }
+
+    /// The strides of [`Self::at`] in `a` and in `m`.
+    #[inline(always)]
+    pub(crate) fn strides(&self) -> (usize, usize) {
+        (self.coordinate, self.stage)
+    }
 }
 
 /// Why one attempt at a step failed.
