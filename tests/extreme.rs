@@ -336,3 +336,29 @@ fn extreme_far_positions_converge_at_round_off() {
         .unwrap_or_else(|f| panic!("fpu_chain 1024: {}", f.error));
     assert_eq!(end.stats.steps, 4);
 }
+
+/// Hairer's scaled van der Pol at μ = 10⁶ (`ε = 10⁻¹²`, τ ∈ [0, 2], run as the unscaled
+/// model over t ∈ [0, 2·10⁶]): adaptive lobatto6 goes through the initial layer and both
+/// relaxation jumps and ends `Ok` within the tolerance of `x(2)` from scipy's Radau on the
+/// scaled form (`data/reference/van_der_pol_scaled_1e6.csv`, good to about 1e-13). Its
+/// steps at the jumps (about 10⁻⁷) stay far above the floor `16ε t` that stops lobatto4
+/// there; the stability report has every scheme and tolerance.
+#[test]
+fn extreme_scaled_van_der_pol_mu_1e6_adaptive_lobatto6_ends_within_tolerance() {
+    let x_ref = 1.705_546_217_535_202_5;
+    let model = forced_vi_models::models::StiffVanDerPol::VERY_STIFF;
+    for tol in [1e-3, 1e-6] {
+        let end = Integrator::adaptive(&model, Scheme::lobatto(6).unwrap(), tol, tol)
+            .unwrap()
+            .final_state(InitialState::from_velocity([2.0], [0.0]), 2.0e6)
+            .unwrap_or_else(|f| panic!("tol {tol}: {}", f.error));
+        let err = (end.q[0] - x_ref).abs();
+        assert!(err <= tol, "tol {tol}: x(2) off by {err:e}");
+        // The run resolves the jumps rather than stepping over them: hundreds of steps.
+        assert!(
+            end.stats.steps > 100,
+            "tol {tol}: {} steps",
+            end.stats.steps
+        );
+    }
+}
