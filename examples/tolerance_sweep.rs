@@ -1,7 +1,9 @@
 //! Tolerance proportionality on models the controller was not tuned on:
 //! `cargo run --release --example tolerance_sweep`.
 //!
-//! Nine small forced models (none of them a report scene), each run adaptively with
+//! Twelve small forced models (none of them a report scene; the last three amplify errors
+//! over the run, the eccentric Kepler orbit over two lengths, and were added after the
+//! controller's last change), each run adaptively with
 //! lobatto3–7 and with `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12. The
 //! final error in `q` (max-norm) is taken against fixed-step lobatto7 at `h = 2e-3`, checked
 //! against lobatto6 at `h = 1e-3`. A sweep's slope is the least-squares slope of
@@ -92,6 +94,33 @@ struct DrivenPendulum {}
     )
 )]
 struct QuadraticDrag {}
+
+/// A Kepler orbit of eccentricity 0.56 with weak drag: a perturbation of its period grows
+/// linearly, so the orbit amplifies errors over the run (three orbits, and nine).
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 1.0 / (x * x + y * y).sqrt(),
+    force(x = -0.001 * x_dot, y = -0.001 * y_dot)
+)]
+struct EccentricKepler {}
+
+/// A pendulum started near its separatrix (3 rad), light drag: its period depends steeply
+/// on its energy.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot + x.cos(),
+    force(x = -0.01 * x_dot)
+)]
+struct NearSeparatrix {}
+
+/// An undriven hardening Duffing oscillator with weak drag, amplitude 1.5: its frequency
+/// depends on its amplitude.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x - 0.5 * x * x * x * x,
+    force(x = -0.01 * x_dot)
+)]
+struct HardeningDuffing {}
 
 /// One sweep's summary.
 struct Sweep {
@@ -225,6 +254,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     let drag = InitialState::from_velocity([1.0, 0.5], [0.3, 0.0]);
     sweep_model("quadratic_drag", &QuadraticDrag {}, drag, 10.0, &mut all)?;
+    // Models that amplify errors (added after the controller's last change).
+    let ecc = InitialState::from_velocity([1.0, 0.0], [0.0, 1.25]);
+    sweep_model("eccentric_kepler", &EccentricKepler {}, ecc, 40.0, &mut all)?;
+    sweep_model(
+        "eccentric_kepler_long",
+        &EccentricKepler {},
+        ecc,
+        120.0,
+        &mut all,
+    )?;
+    let sep = InitialState::from_velocity([3.0], [0.0]);
+    sweep_model("near_separatrix", &NearSeparatrix {}, sep, 40.0, &mut all)?;
+    let hard = InitialState::from_velocity([1.5], [0.0]);
+    sweep_model(
+        "hardening_duffing",
+        &HardeningDuffing {},
+        hard,
+        60.0,
+        &mut all,
+    )?;
     let slopes: Vec<f64> = all.iter().filter_map(|s| s.slope).collect();
     let outside = slopes.iter().filter(|k| !(0.8..=1.2).contains(*k)).count();
     let mean = slopes.iter().map(|k| (k - 1.0).abs()).sum::<f64>() / slopes.len().max(1) as f64;
