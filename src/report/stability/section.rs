@@ -324,7 +324,7 @@ gets through the first jump with h ≥ 0.2, even with 64 substeps; from h = 0.1 
 2e-3 the runs finish (mostly after subdivision) but the jump lands at the wrong time and the \
 final error is O(1) (`wrong` above). Accurate fixed-step results need h ≤ 5e-4 (4·10⁶ steps \
 and more), thousands of times BDF's cost. Adaptive steps close that gap (Stiff cost above, \
-timed again): lobatto4 at tol 1e-1 takes 224 steps and ends 8.7e-8 off, about 2.4 times \
+timed again): lobatto4 at tol 1e-1 takes 224 steps and ends 8.7e-8 off, 2.3 to 2.5 times \
 BDF's time to an error of 1e-3, the same time to 1e-5 and less than half of it to 1e-7; \
 lobatto6 at tol 1e-2 ends below 1e-8, which neither baseline reaches at any tolerance it \
 accepts.\n\
