@@ -2,15 +2,21 @@
 //! every fixed choice: `cargo run --release --example auto_order`.
 //!
 //! On three of the report's models and three models the rule was not tuned on, each adaptive
-//! Lobatto scheme (s = 3 … 7) and `auto` run at `rtol = atol = tol` for tol = 1e-4, 1e-7 and
+//! Lobatto scheme (s = 3 … 8) and `auto` run at `rtol = atol = tol` for tol = 1e-4, 1e-7 and
 //! 1e-10. Each run is timed (median of 7) and its final `(q, p)` compared with a reference
 //! (fixed-step lobatto5 at `T/40000`, below 1e-13 on these models). The last column is the
 //! time of `auto` over the cheapest scheme whose error is within 10·tol: 1.00 means the rule
 //! picked the cheapest one.
+//!
+//! A second table runs the same schemes on Hairer's scaled van der Pol at μ = 10⁶ (the
+//! stability report's `van_der_pol_scaled_1e6`, to τ = 2), capped at 2·10⁶ steps: the
+//! stiff case that decides why the rule takes an even number of stages.
 use std::time::Instant;
 
 use forced_vi::prelude::*;
-use forced_vi_scenes::models::{CoupledVanDerPol, DoublePendulumFriction, KeplerDrag};
+use forced_vi_scenes::models::{
+    CoupledVanDerPol, DoublePendulumFriction, KeplerDrag, StiffVanDerPol,
+};
 
 /// Hénon–Heiles with linear drag (held out).
 #[forced_lagrangian(
@@ -80,7 +86,7 @@ fn measure<M: ForcedLagrangian<N> + Sync, const N: usize>(
     for tol in TOLS {
         let mut cells = Vec::new();
         let mut best = f64::INFINITY;
-        for s in 3..=7 {
+        for s in 3..=8 {
             let integ = Integrator::adaptive(model, Scheme::lobatto(s)?, tol, tol)?;
             let end = integ.final_state(init, t_final).map_err(|f| f.error)?;
             let e = err(end.q.as_slice(), end.p.as_slice());
@@ -115,7 +121,7 @@ fn main() -> Result<(), forced_vi::Error> {
         "{:<18} {:>7} | {} | {:>8} {:>8} {:>7} | auto/cheapest",
         "model",
         "tol",
-        (3..=7)
+        (3..=8)
             .map(|s| format!("lobatto{s}: µs     err"))
             .collect::<Vec<_>>()
             .join(" |"),
@@ -175,5 +181,50 @@ fn main() -> Result<(), forced_vi::Error> {
         all[all.len() - 1],
         all.len()
     );
+    stiff()?;
+    Ok(())
+}
+
+/// Steps and outcome of each scheme and of `auto` on the scaled van der Pol at μ = 10⁶, with
+/// the error in `x(2)` against the stability report's reference
+/// (`data/reference/van_der_pol_scaled_1e6.csv`, scipy Radau at 3e-11).
+fn stiff() -> Result<(), forced_vi::Error> {
+    const X_REF: f64 = 1.705_546_217_535_202_5;
+    const CAP: usize = 2_000_000;
+    let model = StiffVanDerPol::VERY_STIFF;
+    let init = InitialState::from_velocity([2.0], [0.0]);
+    println!("\nvan der Pol, mu = 1e6, to tau = 2 (steps, error in x, or the typed error; cap {CAP} steps)");
+    let run = |integ: Integrator<'_, StiffVanDerPol, 1>| -> String {
+        match integ.max_steps(CAP).final_state(init, 2.0e6) {
+            Ok(end) => format!("{:>8} {:7.1e}", end.stats.steps, (end.q[0] - X_REF).abs()),
+            Err(f) => {
+                let kind = match f.error {
+                    forced_vi::Error::MaxStepsReached { .. } => "step cap",
+                    forced_vi::Error::StepSizeTooSmall { .. } => "h too small",
+                    forced_vi::Error::ToleranceBelowRoundOff { .. } => "round-off",
+                    _ => "other error",
+                };
+                format!("{kind:>16}")
+            }
+        }
+    };
+    for tol in [1e-3, 1e-5, 1e-6, 1e-7, 1e-9] {
+        let mut cells = Vec::new();
+        for s in 5..=8 {
+            cells.push(run(Integrator::adaptive(
+                &model,
+                Scheme::lobatto(s)?,
+                tol,
+                tol,
+            )?));
+        }
+        let auto = Integrator::auto(&model, tol, tol)?;
+        let name = auto.scheme().id().to_string();
+        println!(
+            "{tol:7.0e} | lobatto5–8: {} | auto ({name}): {}",
+            cells.join(" |"),
+            run(auto)
+        );
+    }
     Ok(())
 }

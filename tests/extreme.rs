@@ -362,3 +362,22 @@ fn extreme_scaled_van_der_pol_mu_1e6_adaptive_lobatto6_ends_within_tolerance() {
         );
     }
 }
+
+/// `Integrator::auto` on the same oscillator at a loose and a tight tolerance: its even stage
+/// counts (lobatto6, lobatto8) finish within the tolerance, where the odd ones it took before
+/// stopped at 1e-5 with a step too small (lobatto5) and needed more than 2·10⁶ steps at 1e-9
+/// (lobatto7). The cap turns such a regression into a failure, not a long wait.
+#[test]
+fn extreme_scaled_van_der_pol_mu_1e6_auto_ends_within_tolerance() {
+    let x_ref = 1.705_546_217_535_202_5;
+    let model = forced_vi_models::models::StiffVanDerPol::VERY_STIFF;
+    for tol in [1e-5, 1e-9] {
+        let end = Integrator::auto(&model, tol, tol)
+            .unwrap()
+            .max_steps(500_000)
+            .final_state(InitialState::from_velocity([2.0], [0.0]), 2.0e6)
+            .unwrap_or_else(|f| panic!("tol {tol}: {}", f.error));
+        let err = (end.q[0] - x_ref).abs();
+        assert!(err <= tol, "tol {tol}: x(2) off by {err:e}");
+    }
+}

@@ -174,7 +174,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// #     }
     /// # }
     /// let integrator = Integrator::auto(&Oscillator, 1e-10, 1e-10)?;
-    /// assert_eq!(integrator.scheme().order(), 12);
+    /// assert_eq!(integrator.scheme().order(), 14);
     /// let end = integrator
     ///     .final_state(InitialState::from_velocity([1.0], [0.0]), 10.0)
     ///     .map_err(|f| f.error)?;
