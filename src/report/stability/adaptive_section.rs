@@ -55,7 +55,7 @@ pub fn adaptive(s: &Summary, cases: &[&dyn Case]) -> String {
     let mut md = format!(
         "### Adaptive runs\n\n\
          The same scenes rerun with error control (`mode = adaptive` in `stability.csv`): \
-         rtol = atol = tol (`lobatto2` and `midpoint` down to {:.0e} only: below it a stiff run takes 10⁷ steps and more), with the fixed-step schemes and lobatto5–7 (these capped at {} steps: `max_steps_reached` past it), first step the whole interval (the `h` column), no subdivision \
+         rtol = atol = tol (`lobatto2` and `midpoint` down to {:.0e} only: below it a stiff run takes 10⁷ steps and more), with the fixed-step schemes and lobatto5–8 (these capped at {} steps: `max_steps_reached` past it), first step the whole interval (the `h` column), no subdivision \
          (the controller rejects a step whose Newton solve fails and shrinks it). An adaptive \
          run should either finish with err_final ≤ 100·tol or stop with a typed error \
          (`step_size_too_small`, `pace_too_slow`, `max_steps_reached`, …). `wrong` here counts the finished \

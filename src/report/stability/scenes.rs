@@ -37,7 +37,7 @@ pub struct Grid {
     pub tols: Vec<f64>,
     /// Tolerances `rtol = atol` of the adaptive variational runs.
     pub adaptive_tols: Vec<f64>,
-    /// The schemes run adaptively: `methods` and lobatto5–7 (`--quick`: `lobatto3` only;
+    /// The schemes run adaptively: `methods` and lobatto5–8 (`--quick`: `lobatto3` only;
     /// second-order schemes need millions of steps on the stiff scenes).
     pub adaptive_methods: Vec<SchemeId>,
 }
@@ -97,9 +97,10 @@ impl Common {
             adaptive_methods: if self.quick {
                 vec![SchemeId::Lobatto(3)]
             } else {
-                // The higher orders too: the adaptive runs are cheap, and on the stiff van
-                // der Pol the cheapest adaptive run to an error of 1e-3 is a lobatto6 one.
-                let higher = [5, 6, 7].map(SchemeId::Lobatto);
+                // The higher orders too: the adaptive runs are cheap, lobatto6 and lobatto8
+                // are what `Integrator::auto` takes on a small model, and only the higher
+                // orders finish the van der Pol at μ = 10⁶ at tight tolerances.
+                let higher = [5, 6, 7, 8].map(SchemeId::Lobatto);
                 self.methods.iter().copied().chain(higher).collect()
             },
         }
