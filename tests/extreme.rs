@@ -381,3 +381,29 @@ fn extreme_scaled_van_der_pol_mu_1e6_auto_ends_within_tolerance() {
         assert!(err <= tol, "tol {tol}: x(2) off by {err:e}");
     }
 }
+
+/// No Lobatto scheme damps a stiff mode that its step does not resolve: on `x'' = −λx'` at
+/// `λh = 10⁶`, one step returns the velocity as `+v₀` for an odd number of stages and as
+/// `−v₀` for an even one (to `O(1/(λh))`), where the flow takes it to `e^{−λh} v₀ ≈ 0`. The
+/// documented reason (`Scheme::for_tolerance`) why `auto` takes even stage counts.
+#[test]
+fn extreme_lobatto_steps_carry_an_unresolved_stiff_mode_with_the_sign_of_their_parity() {
+    // ω tiny, ζ huge: x'' = −ω²x − 2ζω x' ≈ −λ x' with λ = 2ζω = 10⁶.
+    let model = forced_vi_models::models::OverdampedOscillator {
+        omega: 1e-6,
+        zeta: 5e11,
+    };
+    for s in 2..=8 {
+        let end = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 1.0)
+            .unwrap()
+            .final_state(InitialState::from_velocity([0.0], [1.0]), 1.0)
+            .unwrap_or_else(|f| panic!("lobatto{s}: {}", f.error));
+        let sign = if s % 2 == 1 { 1.0 } else { -1.0 };
+        // Measured: `|v − sign| = 2 s (s − 1) / (λh)`, from 4e-6 (s = 2) to 1.1e-4 (s = 8).
+        assert!(
+            (end.v[0] - sign).abs() <= 2.0 * (s * s) as f64 / 1e6,
+            "lobatto{s}: v = {} after one step",
+            end.v[0]
+        );
+    }
+}
