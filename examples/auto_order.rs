@@ -10,12 +10,14 @@
 //!
 //! A second table runs the same schemes on Hairer's scaled van der Pol at μ = 10⁶ (the
 //! stability report's `van_der_pol_scaled_1e6`, to τ = 2), capped at 2·10⁶ steps: the
-//! stiff case that decides why the rule takes an even number of stages.
+//! stiff case that decides why the rule takes an even number of stages. A third runs a
+//! large model on the sparse backend: an over-damped spring chain (32 masses, k = 10⁴,
+//! c = 10⁵), stiff, against which the sparse rule was checked.
 use std::time::Instant;
 
 use forced_vi::prelude::*;
 use forced_vi_scenes::models::{
-    CoupledVanDerPol, DoublePendulumFriction, KeplerDrag, StiffVanDerPol,
+    CoupledVanDerPol, DoublePendulumFriction, KeplerDrag, SpringChain, StiffVanDerPol,
 };
 
 /// Hénon–Heiles with linear drag (held out).
@@ -182,6 +184,7 @@ fn main() -> Result<(), forced_vi::Error> {
         all.len()
     );
     stiff()?;
+    stiff_chain()?;
     Ok(())
 }
 
@@ -224,6 +227,50 @@ fn stiff() -> Result<(), forced_vi::Error> {
             "{tol:7.0e} | lobatto5–8: {} | auto ({name}): {}",
             cells.join(" |"),
             run(auto)
+        );
+    }
+    Ok(())
+}
+
+/// Steps and time of lobatto3–5 and `auto` on an over-damped spring chain of 32 masses
+/// (the sparse backend): velocities relax at a rate of about c = 10⁵, the chain's shape at
+/// rates k/c·(mode)² from 10⁻³ to 0.4.
+fn stiff_chain() -> Result<(), forced_vi::Error> {
+    const N: usize = 32;
+    let model = SpringChain::<N> {
+        m: 1.0,
+        k: 1e4,
+        beta: 1.0,
+        c: 1e5,
+    };
+    let q0: [f64; N] = std::array::from_fn(|i| {
+        let bump = if i == N / 2 { 0.05 } else { 0.0 };
+        0.1 * (std::f64::consts::PI * (i + 1) as f64 / (N + 1) as f64).sin() + bump
+    });
+    let init = InitialState::from_velocity(q0, [0.0; N]);
+    println!("\nover-damped spring chain, 32 masses (sparse backend), to T = 200 (steps, ms)");
+    let run = |integ: &Integrator<'_, SpringChain<N>, N>| -> Result<String, forced_vi::Error> {
+        let t0 = Instant::now();
+        let end = integ.final_state(init, 200.0).map_err(|f| f.error)?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        Ok(format!("{:>8} {:8.1}", end.stats.steps, ms))
+    };
+    for tol in [1e-3, 1e-5] {
+        let mut cells = Vec::new();
+        for s in 3..=5 {
+            cells.push(run(&Integrator::adaptive(
+                &model,
+                Scheme::lobatto(s)?,
+                tol,
+                tol,
+            )?)?);
+        }
+        let auto = Integrator::auto(&model, tol, tol)?;
+        println!(
+            "{tol:7.0e} | lobatto3–5: {} | auto ({}): {}",
+            cells.join(" |"),
+            auto.scheme().id(),
+            run(&auto)?
         );
     }
     Ok(())

@@ -214,8 +214,7 @@ impl Scheme {
     ///
     /// | `tol` | dense backend (small models) | sparse backend (large models) |
     /// |---|---|---|
-    /// | above `10⁻⁶` | `lobatto6` (order 10) | `lobatto3` (order 4) |
-    /// | `10⁻⁶` to above `10⁻⁹` | `lobatto6` | `lobatto4` (order 6) |
+    /// | above `10⁻⁹` | `lobatto6` (order 10) | `lobatto4` (order 6) |
     /// | `10⁻⁹` and below | `lobatto8` (order 14) | `lobatto4` |
     ///
     /// On the dense backend a stage costs little next to a step, so a high order wins at
@@ -229,15 +228,21 @@ impl Scheme {
     /// and 1e-9, while lobatto6 took 1.3·10³ to 6.9·10³ steps from 1e-3 to 1e-7 and
     /// lobatto8 8.8·10⁴ at 1e-9 (lobatto6 reached the cap there), every run that finished
     /// within 1e-11 of the reference. On the non-stiff models of that example this rule
-    /// took 1.00–1.15 times the cheapest fixed choice (median 1.01, three runs), where the
+    /// took 1.00–1.16 times the cheapest fixed choice (median 1.01–1.02, four runs), where the
     /// cheapest stage count per tolerance (lobatto5 above 10⁻⁶, lobatto7 at 10⁻⁹ and below,
-    /// the rule before) took 0.99–1.06. On the sparse backend the LU's fill grows with the
-    /// stages (the table is the cheapest scheme of the report's sweeps there). A tolerance
-    /// that is not finite or not positive gets `lobatto6`. [`crate::Integrator::auto`]
-    /// applies it.
+    /// the rule before) took 0.99–1.06.
+    ///
+    /// On the sparse backend the LU's fill grows with the stages: `lobatto4` at every
+    /// tolerance. lobatto3 is cheaper on the report's large non-stiff scenes at tol 1e-4
+    /// (lobatto4 takes 1.4 and 1.7 times its time on the FPU chain and the 2-D lattice at
+    /// n = 1024), but on a stiff one it takes tens of times more steps: on an over-damped
+    /// chain of 32 masses (`examples/auto_order`) lobatto3 took 3.1·10⁴ and 2.0·10⁵ steps
+    /// at tol 1e-3 and 1e-5, 24 and 46 times lobatto4's time (809 and 2901 steps).
+    ///
+    /// A tolerance that is not finite or not positive gets `lobatto6` (`lobatto4` on the
+    /// sparse backend). [`crate::Integrator::auto`] applies it.
     pub fn for_tolerance(tol: f64, sparse: bool) -> Self {
         let s = match (sparse, tol) {
-            (true, t) if t > 1e-6 => 3,
             (true, _) => 4,
             (false, t) if t.is_nan() || t > 1e-9 => 6,
             (false, _) => 8,

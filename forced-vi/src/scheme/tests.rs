@@ -125,7 +125,8 @@ fn the_order_follows_the_tolerance_and_the_backend() {
     assert_eq!(stages(1e-9, false), 8);
     assert_eq!(stages(1e-12, false), 8);
     assert_eq!(stages(f64::NAN, false), 6);
-    assert_eq!(stages(1e-4, true), 3);
+    assert_eq!(stages(1e-4, true), 4);
+    assert_eq!(stages(1e-2, true), 4);
     assert_eq!(stages(1e-8, true), 4);
 }
 
