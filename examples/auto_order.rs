@@ -10,7 +10,8 @@
 //!
 //! A second table runs the same schemes on Hairer's scaled van der Pol at μ = 10⁶ (the
 //! stability report's `van_der_pol_scaled_1e6`, to τ = 2), capped at 2·10⁶ steps: the
-//! stiff case that decides why the rule takes an even number of stages. A third runs a
+//! stiff case that decides why the rule takes an even number of stages, and a slowly driven
+//! over-damped oscillator, stiff too and held out. A last one runs a
 //! large model on the sparse backend: an over-damped spring chain (32 masses, k = 10⁴,
 //! c = 10⁵), stiff, against which the sparse rule was checked.
 use std::time::Instant;
@@ -52,6 +53,19 @@ struct ElasticPendulum {
 )]
 struct DrivenPendulum {
     c: f64,
+    a: f64,
+    w: f64,
+}
+
+/// A slowly driven, heavily damped oscillator (held out, stiff): `x'' = −x − λx' + a cos ωt`
+/// with λ = 10⁶, whose velocity relaxes in 10⁻⁶ to a slow manifold.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = -lam * x_dot + a * (w * t).cos()),
+)]
+struct DrivenOverdamped {
+    lam: f64,
     a: f64,
     w: f64,
 }
@@ -184,6 +198,7 @@ fn main() -> Result<(), forced_vi::Error> {
         all.len()
     );
     stiff()?;
+    driven_overdamped()?;
     stiff_chain()?;
     Ok(())
 }
@@ -271,6 +286,53 @@ fn stiff_chain() -> Result<(), forced_vi::Error> {
             cells.join(" |"),
             auto.scheme().id(),
             run(&auto)?
+        );
+    }
+    Ok(())
+}
+
+/// Steps of lobatto5–8 and `auto` on the driven over-damped oscillator (held out) to
+/// T = 200, with `x(T)` (the runs agree to the digits shown) or the typed error.
+fn driven_overdamped() -> Result<(), forced_vi::Error> {
+    const CAP: usize = 2_000_000;
+    let model = DrivenOverdamped {
+        lam: 1e6,
+        a: 1e6,
+        w: 0.1,
+    };
+    let init = InitialState::from_velocity([0.0], [0.0]);
+    println!(
+        "\ndriven over-damped oscillator, lambda = 1e6, to T = 200 (steps, x(T); cap {CAP} steps)"
+    );
+    let run = |integ: Integrator<'_, DrivenOverdamped, 1>| -> String {
+        match integ.max_steps(CAP).final_state(init, 200.0) {
+            Ok(end) => format!("{:>8} {:.9}", end.stats.steps, end.q[0]),
+            Err(f) => format!(
+                "{:>20}",
+                format!("{:?}", f.error)
+                    .split([' ', '{'])
+                    .next()
+                    .unwrap_or("error")
+                    .to_string()
+            ),
+        }
+    };
+    for tol in [1e-3, 1e-5, 1e-7] {
+        let mut cells = Vec::new();
+        for s in 5..=8 {
+            cells.push(run(Integrator::adaptive(
+                &model,
+                Scheme::lobatto(s)?,
+                tol,
+                tol,
+            )?));
+        }
+        let auto = Integrator::auto(&model, tol, tol)?;
+        let name = auto.scheme().id().to_string();
+        println!(
+            "{tol:7.0e} | lobatto5–8: {} | auto ({name}): {}",
+            cells.join(" |"),
+            run(auto)
         );
     }
     Ok(())
