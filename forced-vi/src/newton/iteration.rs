@@ -17,6 +17,17 @@ const THETA_REFRESH: f64 = 1e-2;
 /// A first correction above this (relative to the iterate) marks a poor initial guess.
 const FAR_START: f64 = 1e-3;
 
+/// A first correction up to this (relative to the iterate), though above [`FAR_START`],
+/// keeps the factors made for it for one more iteration, which measures their contraction
+/// (see [`Iteration::solve`]); a farther one (a stiff step, a poor guess) refreshes them.
+const FAR_KEPT: f64 = 1e-2;
+
+/// Systems below this many unknowns refresh their factors after a far first correction
+/// anyway: their Jacobian and LU cost about two residuals and solves, what keeping them
+/// saves (measured on coupled van der Pol, lobatto3 with 4 unknowns: the same instructions
+/// within 0.5 %, and on the stiff van der Pol, adaptive lobatto3 took 2–3 % more steps).
+const FAR_KEPT_MIN_UNKNOWNS: usize = 6;
+
 /// Factors carried over from an earlier solve (see [`Iteration::carry_factors`]) are kept
 /// when their correction leaves at most this fraction of the residual.
 const CARRY_THETA: f64 = 0.01;
@@ -432,7 +443,7 @@ impl<V: Buffer> Iteration<V> {
             // ones'.
             let exact = stale && L::constant_jacobian(sys);
             let accepted = if (stale && !exact) || relaxed {
-                it > 1 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
+                it > 1 && halvings == 0 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
             } else {
                 ((small_error && rnorm <= res_tol && halvings == 0) || at_floor) && polished
             };
@@ -465,21 +476,37 @@ impl<V: Buffer> Iteration<V> {
             let refresh = o.simplified
                 && it < o.max_iterations
                 && wants_fresh_jacobian(it, theta, step, znorm, L::COSTLY_FACTORS || stale);
-            // The first fresh factors after those of an earlier step (made at the start of
-            // the second iteration): θ compares their correction with the stale factors' one,
-            // so it does not measure their contraction. A fast one is kept for the next
-            // iteration, which measures it, and its iterates are accepted only once their
-            // estimated error is below round-off, as the stale factors' (an iterate off by up
-            // to `rtol` on every step adds up over a long run; see above); at the residual's
-            // floor, where further corrections are noise, fresh factors finish the solve.
-            // Measured on coupled van der Pol, lobatto7 at h = 0.25: the fresh correction was
-            // 0.09 of the stale one, and refreshing again cost a second Jacobian and LU on
-            // every step; kept, the next correction was 1e-5 of theirs, and the step took one
-            // iteration more and one Jacobian less.
-            let after_stale = began_stale && refreshed_at == 2 && it == 2;
-            if refresh && after_stale {
+            // Factors made at the start of this iteration, kept for the next one where the
+            // rule above would refresh them, in two cases, and measured there:
+            // - the first fresh factors after those of an earlier step (made at the start of
+            //   the second iteration): θ compares their correction with the stale one's, so it
+            //   does not measure their contraction;
+            // - fresh factors after a far first correction (the far-start rule) of at most
+            //   `FAR_KEPT`: in adaptive runs the predictor at a new step size starts 1e-3 to
+            //   1e-2 of the increments off, and the factors there still contract by 1e-5 or
+            //   less.
+            // Their iterates are then accepted only once their estimated error is below
+            // round-off, as stale factors' are (an iterate off by up to `rtol` on every step
+            // adds up over a long run; see above), and they are refreshed once the measured
+            // contraction predicts more than two further iterations to get there. Measured:
+            // coupled van der Pol, lobatto7 at h = 0.25, after stale factors: the fresh
+            // correction was 0.09 of the stale one, and refreshing again cost a second
+            // Jacobian and LU on every step; kept, the next correction was 1e-5 of theirs.
+            // Kepler with drag, adaptive lobatto6 at tol 1e-8: every step refreshed after
+            // its first correction; kept, the second was 1e-6 of the first.
+            let measured = relaxed && it > refreshed_at;
+            let first_fresh = refreshed_at == it
+                && if it == 1 {
+                    !L::COSTLY_FACTORS
+                        && o.simplified
+                        && step <= FAR_KEPT * znorm
+                        && z.entries().len() >= FAR_KEPT_MIN_UNKNOWNS
+                } else {
+                    began_stale && it == 2
+                };
+            if refresh && first_fresh && !relaxed {
                 relaxed = true;
-            } else if refresh || (relaxed && at_floor) {
+            } else if refresh || (measured && iterations_to_round_off(step, theta, znorm) > 2.0) {
                 self.have_factors = false;
             }
         }
@@ -576,11 +603,27 @@ fn error_estimate(it: usize, step: f64, theta: f64) -> f64 {
     }
 }
 
+/// The further iterations with factors that contract by `θ` after a correction of size
+/// `step` until the estimated error `step θ / (1 − θ)` is below the round-off of `z` (of
+/// max-norm `znorm`): infinite where they do not contract.
+fn iterations_to_round_off(step: f64, theta: f64, znorm: f64) -> f64 {
+    let floor = f64::EPSILON * znorm;
+    let err = error_estimate(2, step, theta);
+    if err <= floor {
+        0.0
+    } else if theta > 0.0 && theta < 1.0 {
+        ((floor / err).ln() / theta.ln()).ceil()
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Whether simplified Newton should refresh its factors after iteration `it`. Stale factors
 /// contract slowly; a fresh Jacobian restores quadratic convergence, so the accepted iterate
 /// is as exact as full Newton's. After the first iteration θ is unknown; a small first
 /// correction means a good initial guess, so the factors taken there stay accurate, and a
-/// large one refreshes them, unless factoring is `costly`: then the second iteration
+/// large one refreshes them (unless the solve keeps them to measure θ: see
+/// [`Iteration::solve`]), unless factoring is `costly`: then the second iteration
 /// measures θ first, and the iterate is accepted no earlier than the third (a solve and a
 /// residual cost little next to a large sparse LU; on the 2-D lattice at n = 256 the
 /// first-correction rule refactored on every lobatto2 step, where θ stayed below 1e-2).

@@ -21,8 +21,9 @@ pub struct NewtonOptions {
     /// Reuse the Jacobian's LU factors across the iterations of one solve (simplified
     /// Newton) (default true), and, for fixed steps of at least 6 unknowns, across steps.
     /// The factors are kept only while the contraction rate stays below 1e-2, and those of
-    /// an earlier step until the iterate's estimated error is below round-off, so the
-    /// accepted iterate is as exact as full Newton's; the round-off-level error floors
+    /// an earlier step (or fresh ones kept past a far first correction) until the iterate's
+    /// estimated error is below round-off, so the accepted iterate is as exact as full
+    /// Newton's; the round-off-level error floors
     /// depend on that. A model whose `STRUCTURE.linear` is true has the same Jacobian at
     /// every step of one size: its fixed steps keep one factorisation at any number of
     /// unknowns, and the first correction made with it is accepted as a fresh one's.
