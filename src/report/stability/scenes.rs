@@ -87,7 +87,7 @@ impl Common {
             } else {
                 // From tol 1: with error control per unit step a stiff run ends orders of
                 // magnitude more accurate than its tolerance (stiff van der Pol at 1e-1:
-                // 1.6e-8 to 2.9e-6 off), and the errors of 1e-3 to 1e-5 the stiff cost
+                // 1.2e-8 to 2.9e-6 off), and the errors of 1e-3 to 1e-5 the stiff cost
                 // table asks about take looser tolerances (lobatto4 at 3e-1: 1.0e-5).
                 [1.0, 0.3]
                     .into_iter()
