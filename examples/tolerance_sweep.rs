@@ -1,15 +1,30 @@
 //! Tolerance proportionality on models the controller was not tuned on:
 //! `cargo run --release --example tolerance_sweep`.
 //!
-//! Twelve small forced models (none of them a report scene; the last three amplify errors
-//! over the run, the eccentric Kepler orbit over two lengths, and were added after the
-//! controller's last change), each run adaptively with
-//! lobatto3–7 and with `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12. The
-//! final error in `q` (max-norm) is taken against fixed-step lobatto7 at `h = 2e-3`, checked
-//! against lobatto6 at `h = 1e-3`. A sweep's slope is the least-squares slope of
-//! log(error) against log(tol) over its runs of at least 4 steps whose error is above
-//! `1e-13 · max(1, |q_ref|)`, as in the report. The last lines count the slopes outside
-//! 0.8–1.2 (issue 23's target) and give the largest final error over its tolerance.
+//! Twenty-two small forced models, none of them a report scene, each run adaptively with
+//! lobatto3–7 and with `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12:
+//! nine the controller was measured on when it was last changed, three that amplify errors
+//! over the run (the eccentric Kepler orbit over two lengths), added after that change, and
+//! a held-out set of ten added on 2026-11-29 with no change to the controller (a Rayleigh
+//! oscillator, two coupled oscillators of frequencies 1 and 12, a bead on a rotating hoop, a
+//! spherical pendulum, an over-damped oscillator, an oscillator of amplitude 1000, a Morse
+//! oscillator, a linear oscillator driven near resonance, a Kepler orbit of eccentricity
+//! about 0.8, a double well). The final error in `q` (max-norm) is taken against fixed-step
+//! lobatto7 at `h = 2e-3`, checked against lobatto6 at `h = 1e-3`. A sweep's slope is the
+//! least-squares slope of log(error) against log(tol) over its runs of at least 4 steps
+//! whose error is above `1e-13 · max(1, |q_ref|)`, as in the report. The last lines count
+//! the slopes outside 0.8–1.2 (issue 23's target), for the held-out set and for all, and
+//! give the largest final error over its tolerance.
+//!
+//! Measured on 2026-11-29: 138 sweeps, 4 slopes outside 0.8–1.2, the largest final error
+//! 7.83 times the tolerance. In the held-out set, 3 of its 60 slopes are outside, all on the
+//! over-damped oscillator (lobatto6 0.57, lobatto7 0.32, `auto` 0.70), and its largest
+//! final error is 1.87 times the tolerance (the double well, lobatto5 at 1e-3). There those
+//! runs take 6 to 23 steps and end 1e-9 to 1e-3 times the tolerance off: each step's
+//! estimate matches its local error (traced for lobatto7 at 1e-3: 1.1e-4 of the tolerance
+//! against 1.2e-4), but the flow damps the errors (its modes decay as e^(−0.38 t) and
+//! e^(−2.6 t)), so the final error is what the last few steps leave, and their sizes move in
+//! jumps as the tolerance changes.
 use forced_vi::prelude::*;
 
 /// A pendulum with linear drag.
@@ -121,6 +136,86 @@ struct NearSeparatrix {}
     force(x = -0.01 * x_dot)
 )]
 struct HardeningDuffing {}
+
+/// A Rayleigh oscillator, self-excited through its velocity (held-out set of 2026-11-29).
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = (1.0 - x_dot * x_dot / 3.0) * x_dot)
+)]
+struct Rayleigh {}
+
+/// Two oscillators of frequencies 1 and 12, weakly coupled, light drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 0.5 * x * x - 72.0 * y * y - 0.3 * x * y,
+    force(x = -0.02 * x_dot, y = -0.02 * y_dot)
+)]
+struct TwoScale {}
+
+/// A bead on a rotating hoop, with drag.
+#[forced_lagrangian(
+    coordinates(th),
+    lagrangian = 0.5 * th_dot * th_dot + 2.0 * th.sin() * th.sin() + 2.0 * th.cos(),
+    force(th = -0.1 * th_dot)
+)]
+struct Hoop {}
+
+/// A spherical pendulum with light drag: a mass matrix that depends on the position.
+#[forced_lagrangian(
+    coordinates(th, ph),
+    lagrangian = 0.5 * (th_dot * th_dot + th.sin() * th.sin() * ph_dot * ph_dot) + 3.0 * th.cos(),
+    force(th = -0.05 * th_dot, ph = -0.05 * ph_dot)
+)]
+struct Spherical {}
+
+/// A heavily damped (over-damped) nonlinear oscillator, not stiff: c = 3.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x - 0.1 * x * x * x * x,
+    force(x = -3.0 * x_dot)
+)]
+struct Overdamped {}
+
+/// An oscillator of amplitude 1000 with a weak cubic term: relative tolerances at work.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x - 1e-7 * x * x * x * x,
+    force(x = -0.05 * x_dot)
+)]
+struct BigScale {}
+
+/// A Morse oscillator with drag.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - (1.0 - (-x).exp()) * (1.0 - (-x).exp()),
+    force(x = -0.05 * x_dot)
+)]
+struct Morse {}
+
+/// A linear oscillator driven near resonance, from rest.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x,
+    force(x = -0.05 * x_dot + (0.95 * t).cos())
+)]
+struct Resonance {}
+
+/// A Kepler orbit of eccentricity about 0.8 with weak drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 1.0 / (x * x + y * y).sqrt(),
+    force(x = -0.002 * x_dot, y = -0.002 * y_dot)
+)]
+struct Kepler08 {}
+
+/// A double well with drag, started over the barrier.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot + 0.5 * x * x - 0.25 * x * x * x * x,
+    force(x = -0.1 * x_dot)
+)]
+struct DoubleWell {}
 
 /// One sweep's summary.
 struct Sweep {
@@ -274,6 +369,66 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         60.0,
         &mut all,
     )?;
+    let before = all.len();
+    // A held-out set of ten models, added on 2026-11-29 with no change to the controller.
+    let held: [(&str, f64); 10] = [
+        ("rayleigh", 20.0),
+        ("two_scale", 10.0),
+        ("hoop", 15.0),
+        ("spherical", 10.0),
+        ("overdamped", 10.0),
+        ("big_scale", 10.0),
+        ("morse", 20.0),
+        ("resonance", 30.0),
+        ("kepler_e08", 20.0),
+        ("double_well", 20.0),
+    ];
+    let one = |x: f64, v: f64| InitialState::from_velocity([x], [v]);
+    let two = |x: [f64; 2], v: [f64; 2]| InitialState::from_velocity(x, v);
+    sweep_model(held[0].0, &Rayleigh {}, one(0.1, 0.0), held[0].1, &mut all)?;
+    let ts = two([1.0, 0.1], [0.0, 0.0]);
+    sweep_model(held[1].0, &TwoScale {}, ts, held[1].1, &mut all)?;
+    sweep_model(held[2].0, &Hoop {}, one(0.5, 1.0), held[2].1, &mut all)?;
+    let sp = two([1.0, 0.0], [0.0, 1.5]);
+    sweep_model(held[3].0, &Spherical {}, sp, held[3].1, &mut all)?;
+    sweep_model(
+        held[4].0,
+        &Overdamped {},
+        one(2.0, 0.0),
+        held[4].1,
+        &mut all,
+    )?;
+    sweep_model(
+        held[5].0,
+        &BigScale {},
+        one(1000.0, 0.0),
+        held[5].1,
+        &mut all,
+    )?;
+    sweep_model(held[6].0, &Morse {}, one(-0.5, 0.0), held[6].1, &mut all)?;
+    sweep_model(held[7].0, &Resonance {}, one(0.0, 0.0), held[7].1, &mut all)?;
+    let k8 = two([1.0, 0.0], [0.0, 1.34]);
+    sweep_model(held[8].0, &Kepler08 {}, k8, held[8].1, &mut all)?;
+    sweep_model(
+        held[9].0,
+        &DoubleWell {},
+        one(0.1, 1.2),
+        held[9].1,
+        &mut all,
+    )?;
+    let late: Vec<f64> = all[before..].iter().filter_map(|s| s.slope).collect();
+    let late_out: Vec<String> = late
+        .iter()
+        .filter(|k| !(0.8..=1.2).contains(*k))
+        .map(|k| format!("{k:.2}"))
+        .collect();
+    let late_worst = all[before..].iter().map(|s| s.worst).fold(0.0, f64::max);
+    println!(
+        "held-out set of 2026-11-29: {} sweeps, {} slopes outside 0.8–1.2 ({}); largest final error {late_worst:.2} tol",
+        late.len(),
+        late_out.len(),
+        late_out.join(", ")
+    );
     let slopes: Vec<f64> = all.iter().filter_map(|s| s.slope).collect();
     let outside = slopes.iter().filter(|k| !(0.8..=1.2).contains(*k)).count();
     let mean = slopes.iter().map(|k| (k - 1.0).abs()).sum::<f64>() / slopes.len().max(1) as f64;

@@ -293,6 +293,14 @@
 //! 120 time units, a pendulum near its separatrix, a hardening Duffing oscillator; 24
 //! sweeps): no slope outside 0.8–1.2 (0.86 to 1.18), and final errors up to 7.8 times the
 //! tolerance of `max(1, |q|)` (the Kepler orbit, lobatto7 at 1e-4).
+//! And a held-out set of ten more (a Rayleigh oscillator, two coupled oscillators of
+//! frequencies 1 and 12, a bead on a rotating hoop, a spherical pendulum, an over-damped
+//! oscillator, an oscillator of amplitude 1000, a Morse oscillator, resonant driving, a
+//! Kepler orbit of eccentricity 0.8, a double well; 60 sweeps), added with no change to the
+//! controller: 3 slopes outside 0.8–1.2, all on the over-damped oscillator (lobatto6 0.57,
+//! lobatto7 0.32, `auto` 0.70: runs of 6 to 23 steps that end 1e-9 to 1e-3 times the
+//! tolerance off, the flow damping each step's error, which the estimate gets right), and
+//! final errors up to 1.9 times the tolerance.
 //!
 //! *The history term* `‖e_prev‖` is floored at 1e-4 (Hairer's `facold`). Unfloored, an
 //! error far below the tolerance, as on the first steps after the cautious first step,
