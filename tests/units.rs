@@ -405,6 +405,61 @@ mod report_orders {
         );
     }
 
+    /// A clean power law settles its order, over three points as over many.
+    #[test]
+    fn a_clean_power_law_settles_its_order() {
+        for (n, ratio) in [(3, 0.5f64), (12, 0.8)] {
+            let pts: Vec<_> = (0..n)
+                .map(|k| {
+                    let h = ratio.powi(k);
+                    (h, 1e-4 * h.powi(6) * (1.0 + 1e-3 * h))
+                })
+                .collect();
+            let fit = observed_order(&pts, 1.0).unwrap();
+            assert_eq!(fit.unsettled(), None, "{n}: {fit:?}");
+            assert!(fit.half_width() < 0.01, "{}", fit.half_width());
+        }
+    }
+
+    /// Three points of a wiggling curve that line up over too short a fall: the committed
+    /// full report's driven_duffing lobatto6 sweep (order 10), which read 11.76 there,
+    /// with the segments beyond them at 9.1..21.4.
+    #[test]
+    fn a_straight_but_short_fit_does_not_settle() {
+        let pts = [
+            (0.27271, 2.2759e-11),
+            (0.25921, 1.3323e-11),
+            (0.24467, 7.5222e-12),
+            (0.22965, 3.5684e-12),
+            (0.21636, 1.7725e-12),
+        ];
+        let fit = observed_order(&pts[2..], 1.0).unwrap();
+        assert!(fit.half_width() < 0.3, "{}", fit.half_width());
+        assert!(matches!(fit.unsettled(), Some(Unsettled::Short { .. })), "{fit:?}");
+        // With the two points above them (segments 9.1 and 10.5), the wiggle shows in the
+        // residuals.
+        let fit = observed_order(&pts, 1.0).unwrap();
+        assert!(fit.unsettled().is_some(), "{fit:?}");
+    }
+
+    /// A pre-asymptotic triple that reaches the floor with a jump: the committed coupled van
+    /// der Pol lobatto7 sweep (order 12), whose first three points above round-off fitted 9.02.
+    #[test]
+    fn a_bent_triple_does_not_settle() {
+        let pts = [
+            (1.0, 1.0e-4),
+            (0.5, 1.4e-8),
+            (1.0 / 3.0, 3.3e-10),
+            (0.25, 2.6e-11),
+            (0.2, 1.8e-13),
+            (1.0 / 6.0, 1.1e-13),
+            (1.0 / 7.0, 2.1e-14),
+        ];
+        let fit = observed_order(&pts, 1.8385).unwrap();
+        assert!((fit.order - 9.0).abs() < 0.1, "{fit:?}");
+        assert!(matches!(fit.unsettled(), Some(Unsettled::Wide { .. })), "{fit:?}");
+    }
+
     #[test]
     fn too_few_points_give_none() {
         assert!(observed_order(&[(1.0, 1e-4), (0.5, 1e-5)], 1.0).is_none());

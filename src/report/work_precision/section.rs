@@ -247,12 +247,17 @@ fn observed_orders(summary: &Summary) -> String {
          (round-off) and {:.0e}·s (pre-asymptotic), s = max(1, |reference|), and above a \
          scattered round-off tail at {} times its median error or more, the {} smallest \
          step sizes start the fit, and larger ones join while their segment's slope stays \
-         within {} of the fit (`src/report/orders.rs`). `orders.csv` holds the order in q.\n\n",
+         within {} of the fit (`src/report/orders.rs`). A fit is shown only where it settles \
+         the order: its slope's 95 % confidence half-width is at most {}, and its errors \
+         fall by a factor {} or more across it; elsewhere a dash, and `orders.csv`'s note \
+         gives the unsettled fit. `orders.csv` holds the order in q.\n\n",
         orders::FLOOR,
         orders::CEILING,
         orders::FLOOR_MARGIN,
         orders::MIN_POINTS,
-        orders::TRIM
+        orders::TRIM,
+        orders::SETTLED,
+        orders::MIN_FALL
     );
     md.push_str(&markdown(
         &summary.orders,

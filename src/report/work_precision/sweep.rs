@@ -313,9 +313,9 @@ fn sweep(scene: &dyn Scene, method: &Method, mode: Mode, plan: &Plan) -> Swept {
     out
 }
 
-/// Why an order in q is blank or off (empty when it is within 0.3 of `expected`): the
-/// sweep's points, and how many lie between the round-off floor and the ceiling of the rule
-/// (`orders`).
+/// Why an order in q is blank or off (empty when it is within 0.3 of `expected`): the fit
+/// that does not settle the order, or the sweep's points and how many lie between the
+/// round-off floor and the ceiling of the rule (`orders`).
 fn order_note(
     pts: &[(f64, f64)],
     fit: Option<&orders::Fit>,
@@ -328,6 +328,15 @@ fn order_note(
         .filter(|&&(_, e)| e.is_finite() && e >= orders::FLOOR * s && e <= orders::CEILING * s)
         .count();
     match fit {
+        Some(f) if f.unsettled().is_some() => format!(
+            "blank: no stretch of the sweep above round-off settles the order; the fit over \
+             {} points (h = {:.3e}..{:.3e}) reads {:.2} with {}",
+            f.used.len(),
+            f.used[f.used.len() - 1].0,
+            f.used[0].0,
+            f.order,
+            f.unsettled().map_or(String::new(), |u| u.to_string()),
+        ),
         Some(f) if (f.order - expected as f64).abs() <= 0.3 => String::new(),
         Some(f) => format!(
             "off by {:.2} over {} points (h = {:.3e}..{:.3e})",
@@ -366,9 +375,11 @@ pub fn fit_orders(scenes: &[&dyn Scene], summary: &mut Summary) {
                     .map(|r| (r.h_or_tol, r.errors()[k]))
                     .collect()
             };
-            let observed = [0, 1, 2].map(|k| orders::observed_order(&points(k), scale[k]));
+            let fits = [0, 1, 2].map(|k| orders::observed_order(&points(k), scale[k]));
             let expected = scheme.order();
-            let note = order_note(&points(0), observed[0].as_ref(), expected, scale[0]);
+            let note = order_note(&points(0), fits[0].as_ref(), expected, scale[0]);
+            // Only settled fits are published (`orders`, rules 4 and 5).
+            let observed = fits.map(|f| f.filter(|f| f.unsettled().is_none()));
             summary.orders.push(OrderRow {
                 scene: scene.name(),
                 method,
