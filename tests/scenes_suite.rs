@@ -9,6 +9,8 @@ mod adaptive;
 mod driven;
 #[path = "ensemble.rs"]
 mod ensemble;
+#[path = "high_order.rs"]
+mod high_order;
 #[path = "paper.rs"]
 mod paper;
 #[path = "report_quick.rs"]

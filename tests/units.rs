@@ -435,7 +435,10 @@ mod report_orders {
         ];
         let fit = observed_order(&pts[2..], 1.0).unwrap();
         assert!(fit.half_width() < 0.3, "{}", fit.half_width());
-        assert!(matches!(fit.unsettled(), Some(Unsettled::Short { .. })), "{fit:?}");
+        assert!(
+            matches!(fit.unsettled(), Some(Unsettled::Short { .. })),
+            "{fit:?}"
+        );
         // With the two points above them (segments 9.1 and 10.5), the wiggle shows in the
         // residuals.
         let fit = observed_order(&pts, 1.0).unwrap();
@@ -457,7 +460,10 @@ mod report_orders {
         ];
         let fit = observed_order(&pts, 1.8385).unwrap();
         assert!((fit.order - 9.0).abs() < 0.1, "{fit:?}");
-        assert!(matches!(fit.unsettled(), Some(Unsettled::Wide { .. })), "{fit:?}");
+        assert!(
+            matches!(fit.unsettled(), Some(Unsettled::Wide { .. })),
+            "{fit:?}"
+        );
     }
 
     #[test]
