@@ -18,6 +18,8 @@ mod generated_models;
 mod macro_kernels;
 #[path = "predictor.rs"]
 mod predictor;
+#[path = "runs.rs"]
+mod runs;
 #[path = "sensitivity.rs"]
 mod sensitivity;
 #[path = "sparse.rs"]

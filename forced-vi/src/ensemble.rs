@@ -96,7 +96,27 @@ where
         O: Output<N> + Clone + Sync,
         O::Value: Send,
     {
-        map(members, |init| self.solve(*init, t_final, output.clone()))
+        // Each worker runs its members on one stepper, restarted member to member
+        // (`Integrator::runs`): the same results as a new stepper per member.
+        #[cfg(feature = "rayon")]
+        {
+            use rayon::prelude::*;
+            members
+                .par_iter()
+                .map_init(
+                    || self.runs(),
+                    |runs, init| runs.solve(*init, t_final, output.clone()),
+                )
+                .collect()
+        }
+        #[cfg(not(feature = "rayon"))]
+        {
+            let mut runs = self.runs();
+            members
+                .iter()
+                .map(|init| runs.solve(*init, t_final, output.clone()))
+                .collect()
+        }
     }
 
     /// `ensemble(members, t_final, output::Records)`.

@@ -49,6 +49,52 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
+    /// Back to the state the backend's constructor made, keeping the buffers (a new run on
+    /// the same buffers). Every field is named, so that a field added later must be decided
+    /// on here.
+    pub(crate) fn restart(&mut self) {
+        let StepProblem {
+            model: _,
+            scheme: _,
+            h,
+            t0,
+            q0,
+            p0,
+            xs,
+            vs,
+            grads,
+            jacs,
+            base: _,
+            base_built,
+            cons: _,
+            gval,
+            gjac,
+            blocks_given,
+            noise,
+            noise_h,
+            nodes_z,
+            nodes_valid,
+        } = self;
+        *h = f64::NAN;
+        *t0 = 0.0;
+        q0.fill(0.0);
+        p0.fill(0.0);
+        xs.iter_mut().chain(vs.iter_mut()).for_each(|x| x.fill(0.0));
+        for g in grads.iter_mut() {
+            g.fq.fill(0.0);
+            g.lv.fill(0.0);
+        }
+        jacs.clear();
+        *base_built = false;
+        gval.fill(0.0);
+        gjac.iter_mut().for_each(|g| g.fill(0.0));
+        *blocks_given = false;
+        *noise = 0.0;
+        *noise_h = 0.0;
+        nodes_z.clear();
+        *nodes_valid = false;
+    }
+
     fn nodes(&mut self, z: &DVector<f64>) {
         if self.nodes_valid && self.nodes_z[..] == z.as_slice()[..] {
             return;

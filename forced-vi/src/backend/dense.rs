@@ -96,6 +96,35 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
+    /// Back to the state [`DenseBackend::new`] made, keeping its buffers, for a new run
+    /// ([`crate::Stepper`]'s restart); `across_steps` stays as the run's set-up left it.
+    /// Every field is named, so that a field added later must be decided on here.
+    pub(crate) fn restart(&mut self) {
+        let DenseBackend {
+            prob,
+            newton,
+            z,
+            rhs: _,
+            adjoint,
+            tangent,
+            impulse,
+            mu,
+            rate,
+            carry,
+            across_steps: _,
+        } = self;
+        prob.restart();
+        newton.iteration.restart();
+        z.fill(0.0);
+        // Made on first use, as in a new run (an adjoint or tangent run makes them again).
+        *adjoint = None;
+        *tangent = None;
+        impulse.clear();
+        mu.fill(0.0);
+        rate.fill(0.0);
+        *carry = false;
+    }
+
     /// Gives the next [`StepBackend::solve`] its node blocks instead of evaluating them:
     /// `Σ_i w_{ji} B_i` at its quadrature node `j`, from the blocks `B_i` of the last
     /// Jacobian that `from` evaluated (row `j` of `weights`: the Lagrange basis of `from`'s

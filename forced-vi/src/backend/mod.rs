@@ -318,6 +318,23 @@ impl<M: ForcedLagrangian<N>, const N: usize> Backend<'_, M, N> {
         })
     }
 
+    /// Whether [`Backend::restart`] keeps this backend for a new run: the dense one. The
+    /// sparse one's pattern is recorded at a run's initial state, so a new run makes its own.
+    pub(crate) fn can_restart(&self) -> bool {
+        matches!(self, Backend::Dense(_))
+    }
+
+    /// Back to the state a new backend starts a run in, keeping the buffers (the dense
+    /// backend: [`DenseBackend::restart`]); nothing for the sparse one, see
+    /// [`Backend::can_restart`].
+    pub(crate) fn restart(&mut self) {
+        match self {
+            Backend::Dense(b) => b.restart(),
+            #[cfg(feature = "sparse")]
+            Backend::Sparse(_) => {}
+        }
+    }
+
     /// Gives the next [`StepBackend::solve`] node blocks interpolated from those of `from`'s
     /// last Jacobian (see [`DenseBackend::seed_node_blocks`]); false, and nothing given, where
     /// the backend evaluates its own (the sparse one).

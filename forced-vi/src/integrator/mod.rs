@@ -22,6 +22,7 @@ use crate::stepper::{RunSetup, Stepper};
 
 pub use crate::stepper::StepOptions;
 pub use path::LinearPath;
+pub use run::Runs;
 
 /// The deepest stack the integrator provides for a model's node kernels (4 GiB, mapped
 /// lazily: only the pages the kernels touch use memory).

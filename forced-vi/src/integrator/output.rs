@@ -58,12 +58,14 @@ pub trait Output<const N: usize>: sealed::Sealed {
     /// The value of a run that reached `t_final`.
     type Value;
 
-    /// Runs `integ` from `init` to `t_final` and gives this output back. Called by
-    /// [`Integrator::solve`].
+    /// Runs `integ` from `init` to `t_final` on the stepper in `slot` (restarted) or a new
+    /// one left there, and gives this output back. Called by [`Integrator::solve`] and
+    /// [`Runs::solve`](super::Runs::solve).
     #[doc(hidden)]
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Self::Value, RunFailure<N>>;
@@ -186,27 +188,31 @@ impl<F> sealed::Sealed for Adjoint<F> {}
 impl<const N: usize> Output<N> for Records {
     type Value = Trajectory<N>;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Trajectory<N>, RunFailure<N>> {
         let adaptive = integ.tolerance.is_some();
-        open(integ, init, t_final, |stepper| collect(stepper, adaptive))
+        open(integ, slot, init, t_final, |stepper| {
+            collect(stepper, adaptive)
+        })
     }
 }
 
 impl<const N: usize> Output<N> for Final {
     type Value = FinalState<N>;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<FinalState<N>, RunFailure<N>> {
-        open(integ, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             to_the_end(stepper)
         })
@@ -216,9 +222,10 @@ impl<const N: usize> Output<N> for Final {
 impl<const N: usize> Output<N> for Samples<'_> {
     type Value = Vec<DenseState<N>>;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Vec<DenseState<N>>, RunFailure<N>> {
@@ -230,7 +237,7 @@ impl<const N: usize> Output<N> for Samples<'_> {
         if !ordered || times.last().is_some_and(|&t| t > t_final) {
             return Err(RunFailure::new(Error::UnorderedTimes));
         }
-        open(integ, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             let mut out = Vec::with_capacity(times.len());
             let mut prev: Option<StepRecord<N>> = None;
             stepper.set_next_output(times.first().copied());
@@ -260,13 +267,14 @@ impl<const N: usize> Output<N> for Samples<'_> {
 impl<F: FnMut(&StepRecord<N>), const N: usize> Output<N> for EachStep<F> {
     type Value = RunStats;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         mut self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<RunStats, RunFailure<N>> {
-        open(integ, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             while let Some(rec) = stepper.next() {
                 match rec {
                     Ok(r) => (self.0)(&r),
@@ -281,14 +289,15 @@ impl<F: FnMut(&StepRecord<N>), const N: usize> Output<N> for EachStep<F> {
 impl<const N: usize> Output<N> for Tangents {
     type Value = Sensitivities<N>;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Sensitivities<N>, RunFailure<N>> {
         refuse_constraints(integ)?;
-        open(integ, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
             let end = to_the_end(stepper)?;
@@ -315,14 +324,15 @@ where
 {
     type Value = AdjointGradient<N>;
 
-    fn drive<M: ForcedLagrangian<N>>(
+    fn drive<'s, M: ForcedLagrangian<N>>(
         self,
-        integ: &Integrator<'_, M, N>,
+        integ: &'s Integrator<'_, M, N>,
+        slot: &mut Slot<'s, M, N>,
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<AdjointGradient<N>, RunFailure<N>> {
         refuse_constraints(integ)?;
-        open(integ, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.keep_tape().map_err(|e| stepper.failure(e))?;
             let end = to_the_end(stepper)?;
@@ -361,16 +371,33 @@ fn refuse_constraints<M: ForcedLagrangian<N>, const N: usize>(
     Ok(())
 }
 
-/// Opens the run's stepper and hands it to `visit`; a run that cannot start is a failure
-/// with nothing computed.
-fn open<M: ForcedLagrangian<N>, const N: usize, R>(
-    integ: &Integrator<'_, M, N>,
+/// The stepper a run may start on: the last run's, kept by [`Runs`](super::Runs), or none.
+#[doc(hidden)]
+pub type Slot<'s, M, const N: usize> = Option<Stepper<'s, M, N>>;
+
+/// Opens the run's stepper and hands it to `visit`: the one in `slot` restarted
+/// ([`Stepper::restart`]) where it can be, else a new one, left in `slot` for the next run.
+/// A run that cannot start is a failure with nothing computed, and leaves `slot` empty.
+fn open<'s, M: ForcedLagrangian<N>, const N: usize, R>(
+    integ: &'s Integrator<'_, M, N>,
+    slot: &mut Slot<'s, M, N>,
     init: InitialState<N>,
     t_final: f64,
-    visit: impl FnOnce(&mut Stepper<'_, M, N>) -> Result<R, RunFailure<N>>,
+    visit: impl FnOnce(&mut Stepper<'s, M, N>) -> Result<R, RunFailure<N>>,
 ) -> Result<R, RunFailure<N>> {
-    let mut stepper = integ.stepper(init, t_final).map_err(RunFailure::new)?;
-    visit(&mut stepper)
+    if let Some(stepper) = slot.as_mut() {
+        match stepper.restart(init, t_final) {
+            Ok(true) => return visit(stepper),
+            Ok(false) => {}
+            Err(e) => {
+                *slot = None;
+                return Err(RunFailure::new(e));
+            }
+        }
+    }
+    *slot = None;
+    let stepper = slot.insert(integ.stepper(init, t_final).map_err(RunFailure::new)?);
+    visit(stepper)
 }
 
 /// Steps a lean run to its end and returns its final state (the velocity solved once).

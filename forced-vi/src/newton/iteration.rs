@@ -190,6 +190,51 @@ impl<V: Buffer + Clone> Iteration<V> {
 }
 
 impl<V: Buffer> Iteration<V> {
+    /// Back to the state [`Iteration::new`] made, keeping the buffers and the options (and
+    /// `costly_factors`, which the run's set-up sets): a new run on the same buffers.
+    /// Every field is named, so that a field added later must be decided on here.
+    pub(crate) fn restart(&mut self) {
+        let Iteration {
+            opts: _,
+            r,
+            r_trial,
+            dz,
+            z_trial,
+            have_factors,
+            last_iterations,
+            last_step,
+            last_at_floor,
+            carry,
+            step_h,
+            factors_h,
+            carry_skip,
+            carry_backoff,
+            costly_factors: _,
+            carried_error,
+            negligible,
+            jac_scale,
+            stale_skip,
+            stale_backoff,
+        } = self;
+        for b in [r, r_trial, dz, z_trial] {
+            b.entries_mut().fill(0.0);
+        }
+        *have_factors = false;
+        *last_iterations = 0;
+        *last_step = 0.0;
+        *last_at_floor = false;
+        *carry = None;
+        *step_h = f64::NAN;
+        *factors_h = f64::NAN;
+        *carry_skip = 0;
+        *carry_backoff = 0;
+        *carried_error = 0.0;
+        *negligible = 0.0;
+        *jac_scale = 0.0;
+        *stale_skip = 0;
+        *stale_backoff = 0;
+    }
+
     /// Prepares the next solve, of a step of size `h`, to start from the factors of the
     /// last one instead of fresh ones, and returns whether it will. For the one Newton
     /// iteration of the error estimate (`crate::control`), whose iterate needs to be

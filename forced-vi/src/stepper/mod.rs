@@ -183,7 +183,12 @@ pub struct Stepper<'a, M, const N: usize> {
     /// The resolution of the last estimate (see `adaptive::local_error`).
     resolution: f64,
     options: StepOptions,
+    /// The step size: `h_setup`, or the first step chosen from the initial data.
     h: f64,
+    /// The run set-up's step size, and whether an adaptive run chooses its first step
+    /// instead (kept for a restart, [`Stepper::restart`]).
+    h_setup: f64,
+    auto_first_step: bool,
     t_final: f64,
     n_steps: usize,
     k: usize,

@@ -36,6 +36,30 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         })
     }
 
+    /// Starts a new run from `init` to `t_final` on this stepper's buffers, as
+    /// [`Stepper::new`] would with the same set-up: the same checks, the same records.
+    /// Returns `Ok(false)`, and changes nothing, where the backend cannot be kept (the sparse
+    /// one: [`Backend::can_restart`]); the caller then makes a new stepper. After an error
+    /// the stepper must not be stepped (its state is part reset).
+    pub(crate) fn restart(&mut self, init: InitialState<N>, t_final: f64) -> Result<bool, Error> {
+        let keeps =
+            self.backend.can_restart() && self.reference.as_ref().is_none_or(|r| r.can_restart());
+        if !keeps {
+            return Ok(false);
+        }
+        self.backend.restart();
+        if let Some(r) = self.reference.as_mut() {
+            r.restart();
+        }
+        with_stack(self.stack, || {
+            self.begin(init, t_final)?;
+            if self.auto_first_step && self.tolerance.is_some() {
+                self.choose_first_step()?;
+            }
+            Ok(true)
+        })
+    }
+
     fn start(
         setup: RunSetup<'a, M, N>,
         mut backend: Backend<'a, M, N>,
@@ -72,8 +96,6 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         // `crate::newton`); adaptive steps, whose error estimate reads the step's node
         // blocks, make fresh ones, except a linear model's, whose blocks do not change.
         backend.factors_across_steps(tolerance.is_none() || M::STRUCTURE.linear);
-        check_run(&options, t_final)?;
-        options.check_step_bounds()?;
         // The step polynomial (and its node blocks, or a constrained step's multipliers)
         // at the error reference's points: tables of the scheme, made once.
         let (mut lift, mut block_weights, mut lift_lambda): (&[f64], &[f64], &[f64]) =
@@ -87,31 +109,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
                 lift_lambda = &e.lift_lambda;
             }
         }
-        let n_steps = match tolerance {
-            // Adaptive: the count is not known; the cap is checked as the run goes.
-            Some(_) => step_count(t_final, h, usize::MAX)?,
-            None => step_count(t_final, h, options.max_steps)?,
-        };
-        let mut state = State::new(N, backend.z().len());
-        let mass_sign = initial_state(&mut backend, &mut state, init.parts())?;
-        if model.constraint_count() > 0 {
-            let at = (0.0, &state.q.sum[..], &state.v[..]);
-            let residuals = backend.constraint_residuals(at)?;
-            crate::initial::check_constraints(&state.q.sum, residuals)?;
-        }
-        check_time_flag(model, &state.q.sum, &state.v)?;
-        check_constraint_time_flag(model, &state.q.sum)?;
-        check_force_flag(model, &state.q.sum, &state.v)?;
-        check_structure_flags(model, &state.q.sum, &state.v)?;
-        let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
-        let energy0 = energy(model, 0.0, q0, v0, p0)
-            .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
-        state.h_prev = h;
-        // Filled (and allocated) when first needed: by every adaptive step, and by a fixed
-        // step only if it is subdivided.
-        let saved = State::empty();
-        let unknowns = state.z_prev.len();
-        Ok(Stepper {
+        let unknowns = backend.z().len();
+        let mut stepper = Stepper {
             model,
             scheme,
             backend,
@@ -125,13 +124,17 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             lift_lambda,
             options,
             h,
+            h_setup: h,
+            auto_first_step: setup.auto_first_step,
             t_final,
-            n_steps,
+            n_steps: 0,
             k: 0,
-            state,
-            saved,
-            energy0,
-            mass_sign,
+            state: State::new(N, unknowns),
+            // Filled (and allocated) when first needed: by every adaptive step, and by a
+            // fixed step only if it is subdivided.
+            saved: State::empty(),
+            energy0: 0.0,
+            mass_sign: 1.0,
             q_end: vec![0.0; N],
             v_end: vec![0.0; N],
             dp: vec![0.0; N],
@@ -155,7 +158,124 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             stop: None,
             started: false,
             done: false,
-        })
+        };
+        stepper.begin(init, t_final)?;
+        Ok(stepper)
+    }
+
+    /// The start of a run from `init` to `t_final` on buffers that [`Stepper::start`] made
+    /// (and a past run may have used): the checks of the run and of the initial data, the
+    /// initial state, and every field a run changes back to its start. Every field is
+    /// named, so that a field added later must be decided on here.
+    fn begin(&mut self, init: InitialState<N>, t_final: f64) -> Result<(), Error> {
+        check_run(&self.options, t_final)?;
+        self.options.check_step_bounds()?;
+        let h = self.h_setup;
+        let n_steps = match self.tolerance {
+            // Adaptive: the count is not known; the cap is checked as the run goes.
+            Some(_) => step_count(t_final, h, usize::MAX)?,
+            None => step_count(t_final, h, self.options.max_steps)?,
+        };
+        let Stepper {
+            model: _,
+            scheme,
+            backend: _,
+            reference: _,
+            lift: _,
+            block_weights: _,
+            round_off_sq,
+            unresolved,
+            unresolved_step,
+            resolution,
+            lift_lambda: _,
+            options,
+            h: step,
+            h_setup: _,
+            auto_first_step: _,
+            t_final: end,
+            n_steps: count,
+            k,
+            state,
+            // Read only after a copy into it (`State::copy_from`).
+            saved: _,
+            energy0: _,
+            mass_sign: _,
+            q_end,
+            v_end,
+            dp,
+            basis,
+            extrapolated,
+            extrapolated_same,
+            err,
+            t,
+            tolerance: _,
+            controller,
+            h_next,
+            pace,
+            estimate,
+            band: _,
+            lean,
+            tangent,
+            tape,
+            cforce,
+            stack: _,
+            stats,
+            stop,
+            started,
+            done,
+        } = self;
+        *round_off_sq = 0.0;
+        *unresolved = 0.0;
+        *unresolved_step = 0.0;
+        *resolution = 0.0;
+        *step = h;
+        *end = t_final;
+        *count = n_steps;
+        *k = 0;
+        state.reset();
+        for x in [
+            q_end,
+            v_end,
+            dp,
+            basis,
+            extrapolated,
+            &mut err.0,
+            &mut err.1,
+            cforce,
+        ] {
+            x.fill(0.0);
+        }
+        *extrapolated_same = false;
+        *t = 0.0;
+        *controller = Controller::new(scheme.order());
+        *h_next = h.min(options.max_step);
+        *pace = Default::default();
+        *estimate = 0.0;
+        *lean = false;
+        *tangent = None;
+        *tape = None;
+        *stats = RunStats::default();
+        *stop = None;
+        *started = false;
+        *done = false;
+        // The initial state, and the checks of the initial data.
+        let model = self.model;
+        let state = &mut self.state;
+        self.mass_sign = initial_state(&mut self.backend, state, init.parts())?;
+        if model.constraint_count() > 0 {
+            let at = (0.0, &state.q.sum[..], &state.v[..]);
+            let residuals = self.backend.constraint_residuals(at)?;
+            crate::initial::check_constraints(&state.q.sum, residuals)?;
+        }
+        check_time_flag(model, &state.q.sum, &state.v)?;
+        check_constraint_time_flag(model, &state.q.sum)?;
+        check_force_flag(model, &state.q.sum, &state.v)?;
+        check_structure_flags(model, &state.q.sum, &state.v)?;
+        let (q0, v0, p0) = (&state.q.sum, &state.v, &state.p.sum);
+        self.energy0 = energy(model, 0.0, q0, v0, p0)
+            .ok_or_else(|| non_finite(state.size(), 0, 0.0, "energy"))?;
+        state.h_prev = h;
+        Ok(())
     }
 }
 

@@ -85,6 +85,39 @@ impl State {
         }
     }
 
+    /// Back to [`State::new`]'s zeros, keeping the vectors (a new run on the same buffers).
+    /// Every field is named, so that a field added later must be decided on here.
+    pub(crate) fn reset(&mut self) {
+        let State {
+            q,
+            p,
+            v,
+            work,
+            z_prev,
+            has_prev,
+            h_prev,
+            pred_delta,
+            pred_delta_prev,
+            deltas,
+            delta_helps,
+            scale_f,
+            t_state,
+        } = self;
+        for x in [&mut q.sum, &mut q.comp, &mut p.sum, &mut p.comp, v] {
+            x.fill(0.0);
+        }
+        for x in [z_prev, pred_delta, pred_delta_prev] {
+            x.fill(0.0);
+        }
+        *work = (0.0, 0.0);
+        *has_prev = false;
+        *h_prev = 1.0;
+        *deltas = 0;
+        *delta_helps = false;
+        *scale_f = 0.0;
+        *t_state = 0.0;
+    }
+
     /// A state with no vectors yet (none allocated), for [`State::copy_from`] to fill.
     pub(crate) fn empty() -> Self {
         State::new(0, 0)
