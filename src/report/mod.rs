@@ -6,10 +6,13 @@
 //! report/
 //!   README.md              assembled from sections/ (never edit by hand)
 //!   sections/<name>.md     one Markdown section per command
-//!   work_precision.csv     scene,method,h_or_tol,steps,newton_iters,seconds,err_q,err_p,err_energy
+//!   work_precision.csv     scene,method,h_or_tol,steps,newton_iters,seconds,err_q,err_p,err_energy,mode
 //!   orders.csv             scene,method,stages,expected_order,observed_order,note
 //!   ensemble.csv           min/mean/max errors over the ensemble members
+//!   ensemble_throughput.csv  member steps per second against threads
 //!   energy_balance.csv     the long run's energy-balance error against time
+//!   stability.csv          the stability report's runs (`stability`)
+//!   step_cost.csv          the step-cost report's runs (`step-cost`)
 //!   *.svg                  plots, embedded in README.md
 //! ```
 //!

@@ -356,7 +356,7 @@ pub fn stiff_cost(s: &Summary) -> String {
          follows. The adaptive runs are far more accurate than their tolerance (tol 1e-1 ends \
          8.7e-8 off): the steps are set by the same estimate, the local error of the \
          propagated solution, larger than the global error left after the dissipative fast \
-         mode damps it (at tol 1e-1 every scheme ended between 1.6e-8 and 2.9e-6 off). So the \
+         mode damps it (at tol 1e-1 every scheme ended between 1.2e-8 and 2.9e-6 off). So the \
          adaptive ladder starts at tol 1 and the baselines' at 1e-1: the cheapest run to 1e-3 \
          is then lobatto4 at tol 3e-1 (1.0e-5 off).\n\n",
     );

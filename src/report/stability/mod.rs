@@ -166,8 +166,9 @@ fn adaptive_cases(selected: &[&Planned], methods: &[Method]) -> Vec<(usize, Sche
 
 /// The second-order schemes (`lobatto2`, `midpoint`) run adaptively down to this tolerance
 /// only: on stiff van der Pol, with the error per unit step over T = 2000, lobatto2 needs
-/// 1.1·10⁷ steps at 1e-4 and 1.2·10⁸ at 1e-6, midpoint 2.0·10⁶ and 2.0·10⁷, each ending
-/// within its tolerance (measured 2026-11-25).
+/// 1.6·10⁷ steps at 1e-4 and midpoint 7.3·10⁶ (`report/stability.csv`), each ending within
+/// its tolerance; at 1e-6 they took 1.2·10⁸ and 2.0·10⁷ (measured 2026-11-25, before
+/// later changes to the controller).
 pub const ORDER2_ADAPTIVE_FLOOR: f64 = 1e-4;
 
 /// Every scene × scheme × parameter, smallest parameter first. `pick` gives a scene's

@@ -313,8 +313,9 @@ const NOTES: &str = "### Remarks (from the full run)\n\n\
 - **The Lobatto schemes are only conditionally stable on stiff oscillations.** With Lobatto \
 quadrature the Galerkin schemes are of partitioned Lobatto IIIA–IIIB type (lobatto2 is \
 Störmer–Verlet), so on the stiff chain lobatto2 and lobatto3 blow up for hω from about 3 to \
-300 (`failed:non_finite_model`, `failed:newton_singular_jacobian`) and at hω ≈ 1000 finish \
-their single step `ok` but wrong (|q| ≈ 2·10³ from 0.02). The midpoint rule stays bounded at \
+100 (`failed:overflow`; lobatto3 at hω ≈ 3 `failed:non_finite_model`), at hω ≈ 300 finish \
+`ok` with |q| ≈ 10²⁸, and at hω ≈ 1000 finish their single step `ok` but wrong (|q| ≈ \
+2·10³ from 0.02). The midpoint rule stays bounded at \
 every hω, and at hω ≈ 30 it reaches an error of 1e-2 about 30 to 40 times faster than BDF. \
 For errors of 1e-4 and below on the chain, lobatto4 with fixed steps takes 0.4 to 0.6 times \
 BDF's time (two runs), and ESDIRK34 does not reach 1e-8. None of these schemes is L-stable: \
@@ -358,5 +359,5 @@ and on the coupled van der Pol with amplitudes ×100 every run is `ok` at every 
 baselines either way; these runs take microseconds to milliseconds, so timing noise matters.\n\
 - **`ok` is not `accurate`.** The runtime sees finite values and a converged Newton solve; \
 it cannot see a run that is stable but wrong. The `wrong` column and `err_final` do. Where the \
-midpoint rule finishes, its energy balance stays at 1e-6 or below even when the trajectory \
+midpoint rule finishes, its energy balance stays at 5e-6 or below even when the trajectory \
 is wrong, so a small energy-balance error is no evidence of accuracy either.";

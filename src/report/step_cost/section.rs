@@ -28,9 +28,10 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
         .collect();
     paper_table(&mut md, s, &paper);
     targets_speed(&mut md, &paper);
+    // The same table: its rows 4–7 follow 1–3.
+    targets_resources(&mut md, s);
     diagnostics_table(&mut md, s);
     ensemble_table(&mut md, s);
-    targets_resources(&mut md, s);
     slimplectic(&mut md, &paper);
     md.push_str(&super::scaling_section::markdown_section(s, plot));
     compile_and_memory(&mut md, s);

@@ -770,12 +770,29 @@ fn ledger_under_adaptivity(lr: &LongRun) -> String {
 }
 
 fn long_run(lr: &LongRun, fig: &str) -> String {
+    // The runs that could not get near the budget (an adaptive run's loosest tolerance may
+    // cost more).
+    let dear: Vec<String> = lr
+        .curves
+        .iter()
+        .filter(|c| c.seconds > 1.5 * lr.budget)
+        .map(|c| format!("`{}` {} ({})", c.method, c.mode, fmt_time(c.seconds)))
+        .collect();
+    let over = if dear.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " More than 1.5 budgets even at the loosest setting tried: {}.",
+            dear.join(", ")
+        )
+    };
     let mut md = format!(
         "### Energy balance over a long run\n\n\
          `{}` to t = {}: the energy-balance error E(t) − E(0) − W(t), with W the work of \
          the force (the variational schemes sum it with their own quadrature, the baselines \
-         integrate W' = F·v as an extra ODE component). All runs cost about the same: the \
-         budget is {} (`lobatto3`, h = {LONG_RUN_REFERENCE_H}). Energy-balance errors \
+         integrate W' = F·v as an extra ODE component). Each run is sized to cost about \
+         the budget, {} (`lobatto3`, h = {LONG_RUN_REFERENCE_H}), by its step or its \
+         tolerance.{over} Energy-balance errors \
          below {:.0e} (zero to round-off) are drawn at {:.0e}.\n\n\
          ![energy balance against time]({fig})\n\n",
         lr.scene,
