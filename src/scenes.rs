@@ -21,6 +21,7 @@ use crate::models::{
     KapitzaPendulum, KeplerDrag,
 };
 use crate::reference::Reference;
+use crate::report::timing;
 
 /// The reference state of one member at the final time.
 #[derive(Clone, Debug, PartialEq)]
@@ -112,6 +113,19 @@ pub trait Scene: Send + Sync {
     /// the automatic first step ([`Integrator::adaptive`]).
     fn run_adaptive(&self, scheme: &Scheme, tol: f64, member: usize)
         -> Result<Outcome, SceneError>;
+    /// Times a variational run of member 0 to the final time (`adaptive`: at
+    /// `rtol = atol = h_or_tol` from the automatic first step; else fixed steps of
+    /// `h_or_tol`) two ways, alternating over `rounds`: with a new integrator and stepper
+    /// each run (as the sweeps time it), and restarted on one stepper
+    /// ([`Integrator::runs`]), as an integrator built once is timed. Their medians in
+    /// seconds, new first; an error if the two give different final states.
+    fn time_restarted(
+        &self,
+        scheme: &Scheme,
+        adaptive: bool,
+        h_or_tol: f64,
+        rounds: usize,
+    ) -> Result<(f64, f64), SceneError>;
     /// Runs a baseline at tolerance `tol` to the final time.
     fn run_baseline(
         &self,
@@ -334,6 +348,46 @@ where
     ) -> Result<Outcome, SceneError> {
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ, member)
+    }
+    fn time_restarted(
+        &self,
+        scheme: &Scheme,
+        adaptive: bool,
+        h_or_tol: f64,
+        rounds: usize,
+    ) -> Result<(f64, f64), SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let init = InitialState::from_velocity(q0, v0);
+        let build = || match adaptive {
+            true => Integrator::adaptive(&self.model, scheme.clone(), h_or_tol, h_or_tol),
+            false => Integrator::new(&self.model, scheme.clone(), h_or_tol),
+        };
+        let kept = build()?;
+        let mut runs = kept.runs();
+        let (mut new, mut restarted) = (Vec::new(), Vec::new());
+        for round in 0..rounds.max(1) {
+            // Which goes first alternates, so that a drift in the machine's load hits both.
+            let fresh =
+                || timing::timed(|| build().and_then(|i| Ok(i.final_state(init, self.t_final)?)));
+            let mut again = || timing::timed(|| runs.solve(init, self.t_final, output::Final));
+            let ((a, ta), (b, tb)) = if round % 2 == 0 {
+                let a = fresh();
+                (a, again())
+            } else {
+                let b = again();
+                (fresh(), b)
+            };
+            let (a, b) = (a?, b.map_err(|f| f.error)?);
+            if a.q != b.q || a.p != b.p {
+                return Err(SceneError::Reference {
+                    scene: self.name,
+                    message: "a restarted run differs from a new one".into(),
+                });
+            }
+            new.push(ta);
+            restarted.push(tb);
+        }
+        Ok((timing::median(&mut new), timing::median(&mut restarted)))
     }
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError> {
         let (q0, v0) = self.start(0)?;

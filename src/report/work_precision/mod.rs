@@ -47,6 +47,10 @@ use crate::report::table::write_csv;
 use crate::report::{readme, Method, Options, ReportError};
 use crate::scenes::{self, Scene};
 
+/// Rounds of the restarted-stepper timing (each times a new and a restarted run; the runs
+/// take microseconds to a few hundred).
+pub const RESTART_ROUNDS: usize = 41;
+
 pub mod equal_error;
 pub mod external;
 pub mod figures;
@@ -176,6 +180,31 @@ pub fn run(opts: &Options) -> Result<Summary, ReportError> {
                 .paired
                 .extend(sweep::paired(*scene, &summary, target, &plan));
         }
+    }
+    // The paired variational runs again, restarted on one stepper, where heyoka (timed on
+    // an integrator built once) ran the scene alone.
+    for p in &summary.paired {
+        let Some(scene) = selected.iter().find(|s| s.name() == p.scene) else {
+            continue;
+        };
+        if scene.members() != 1 || summary.external.rows_of(p.scene).is_empty() {
+            continue;
+        }
+        let (method, mode, x) = p.variational;
+        let Some(scheme) = method.scheme() else {
+            continue;
+        };
+        let rounds = RESTART_ROUNDS;
+        let seconds = scene
+            .time_restarted(&scheme, mode == Mode::Adaptive, x, rounds)
+            .map_err(|e| e.to_string());
+        summary.restarted.push(rows::Restarted {
+            scene: p.scene,
+            target: p.target,
+            variational: p.variational,
+            seconds,
+            rounds,
+        });
     }
     for scene in &selected {
         let scale = sweep::reference_scale(*scene)[0];

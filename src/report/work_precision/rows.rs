@@ -186,6 +186,26 @@ pub struct Summary {
     /// Each adaptive-against-fixed line's middle run and its fixed curve timed again
     /// together (see [`super::equal_error`]).
     pub equal_error: Vec<super::equal_error::Timed>,
+    /// The paired variational runs on the scenes heyoka ran, timed with a new stepper and
+    /// with a restarted one (see [`Restarted`]).
+    pub restarted: Vec<Restarted>,
+}
+
+/// A paired variational run ([`Paired`]) timed again two ways: built anew each run, as the
+/// sweeps time every run, and restarted on one stepper (`Integrator::runs`), as heyoka's
+/// integrator is built once and timed on `propagate_until` alone.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Restarted {
+    /// The scene.
+    pub scene: &'static str,
+    /// The error target in q.
+    pub target: f64,
+    /// The variational run: method, mode and `h` or tolerance.
+    pub variational: (Method, Mode, f64),
+    /// Median wall times, new and restarted, seconds; or why it could not be timed.
+    pub seconds: Result<(f64, f64), String>,
+    /// Rounds, each timing both.
+    pub rounds: usize,
 }
 
 /// The cheapest variational run and the cheapest baseline run reaching one error target on

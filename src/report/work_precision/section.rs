@@ -9,8 +9,9 @@ use super::external::{ExternalRow, HEYOKA_LABEL, HEYOKA_PATH};
 use super::figures::{Figures, BALANCE_FLOOR};
 use super::large;
 use super::long_run::LONG_RUN_REFERENCE_H;
-use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Paired, Summary};
+use super::rows::{BalanceCurve, Failure, LongRun, Mode, OrderRow, Paired, Restarted, Summary};
 use super::sweep::reference_scale;
+use super::RESTART_ROUNDS;
 use crate::report::orders::{self, Fit};
 use crate::report::plan::{Plan, ORDER2_TOL_FLOOR, PAPER_SCENE, PREDICTED_RUN_FACTOR};
 use crate::report::table::{col, fmt_time, markdown};
@@ -43,6 +44,7 @@ pub fn markdown_section(i: &Inputs<'_>) -> String {
     md.push_str(&adaptive_cost(i.scenes, i.summary));
     md.push_str(&cheapest(i.scenes, i.summary));
     md.push_str(&paired(i.summary));
+    md.push_str(&restarted(i.summary));
     md.push_str(&large_models(i.summary));
     md.push_str(&plots(i.scenes, i.figures));
     if let (Some(lr), Some(fig)) = (&i.summary.long_run, &i.figures.energy_balance) {
@@ -646,6 +648,59 @@ fn cheapest(scenes: &[&dyn Scene], summary: &Summary) -> String {
 }
 
 /// The best variational run against the best baseline, timed again in rotating rounds.
+/// The paired variational runs timed with a new and a restarted stepper, against heyoka.
+fn restarted(summary: &Summary) -> String {
+    if summary.restarted.is_empty() {
+        return String::new();
+    }
+    let heyoka = |r: &Restarted| summary.external.cheapest(r.scene, r.target);
+    let cols = vec![
+        col("scene", |r: &Restarted| format!("`{}`", r.scene)),
+        col("target", |r: &Restarted| format!("{:.0e}", r.target)),
+        col("variational run (h or tol)", |r: &Restarted| {
+            let (m, mode, x) = r.variational;
+            format!("`{}` at {x:.3e}", mode.label(&m))
+        }),
+        col("new stepper", |r: &Restarted| match &r.seconds {
+            Ok((n, _)) => fmt_time(*n),
+            Err(e) => format!("failed: {e}"),
+        }),
+        col("restarted", |r: &Restarted| {
+            r.seconds.as_ref().map_or("–".into(), |(_, x)| fmt_time(*x))
+        }),
+        col("restarted ÷ new", |r: &Restarted| {
+            r.seconds
+                .as_ref()
+                .map_or("–".into(), |(n, x)| format!("{:.2}", x / n))
+        }),
+        col("heyoka", move |r: &Restarted| {
+            heyoka(r).map_or("–".into(), |h| fmt_time(h.run_seconds))
+        }),
+        col("restarted ÷ heyoka", move |r: &Restarted| {
+            match (&r.seconds, heyoka(r)) {
+                (Ok((_, x)), Some(h)) if h.run_seconds > 0.0 => {
+                    format!("{:.2}", x / h.run_seconds)
+                }
+                _ => "–".into(),
+            }
+        }),
+    ];
+    let mut text = format!(
+        "\n### A restarted stepper, against heyoka\n\n\
+         heyoka's times are those of `propagate_until` on an integrator built once, its JIT \
+         excluded, with the state reset before each call. The sweeps above build \
+         forced-vi's integrator and stepper for every run: about 30 allocations and the \
+         Newton iteration's set-up on a small model, which a run of a few steps feels. Here \
+         each scene's paired variational run of the table above is timed both ways, \
+         alternating which goes first over {RESTART_ROUNDS} rounds: with a new stepper, as \
+         the sweeps time it, and restarted on one stepper (`Integrator::runs`), whose final \
+         state is checked to be the new one's to the bit. heyoka: its cheapest committed run \
+         reaching the target (see Methods), timed by another process."
+    );
+    let _ = write!(text, "\n\n{}", markdown(&summary.restarted, &cols));
+    text
+}
+
 fn paired(summary: &Summary) -> String {
     if summary.paired.is_empty() {
         return String::new();
