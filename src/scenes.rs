@@ -369,7 +369,12 @@ where
             // Which goes first alternates, so that a drift in the machine's load hits both.
             let fresh =
                 || timing::timed(|| build().and_then(|i| Ok(i.final_state(init, self.t_final)?)));
-            let mut again = || timing::timed(|| runs.solve(init, self.t_final, output::Final));
+            let mut again = || {
+                timing::timed(|| {
+                    runs.solve(init, self.t_final, output::Final)
+                        .map_err(|f| f.error)
+                })
+            };
             let ((a, ta), (b, tb)) = if round % 2 == 0 {
                 let a = fresh();
                 (a, again())
@@ -377,7 +382,7 @@ where
                 let b = again();
                 (fresh(), b)
             };
-            let (a, b) = (a?, b.map_err(|f| f.error)?);
+            let (a, b) = (a?, b?);
             if a.q != b.q || a.p != b.p {
                 return Err(SceneError::Reference {
                     scene: self.name,
