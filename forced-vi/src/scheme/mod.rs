@@ -239,7 +239,7 @@ impl Scheme {
     ///
     /// On the sparse backend the LU's fill grows with the stages: `lobatto4` at every
     /// tolerance. lobatto3 is cheaper on the report's large non-stiff scenes at tol 1e-4
-    /// (lobatto4 takes 1.4 and 1.7 times its time on the FPU chain and the 2-D lattice at
+    /// (lobatto4 takes 1.5 and 1.7 times its time on the FPU chain and the 2-D lattice at
     /// n = 1024), but on a stiff one it takes tens of times more steps: on an over-damped
     /// chain of 32 masses (`examples/auto_order`) lobatto3 took 3.1·10⁴ and 2.0·10⁵ steps
     /// at tol 1e-3 and 1e-5, 24 and 46 times lobatto4's time (809 and 2901 steps).
