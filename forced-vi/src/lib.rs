@@ -69,7 +69,7 @@
 //! | the one stepping loop of every model size: predictor, solve, update, subdivision, adaptive steps, checks | [`stepper`] |
 //! | records, energy and energy balance (DESIGN §4), run totals, [`RunFailure`] | [`trajectory`] |
 //! | error control: tolerances, the reference-scheme estimate, PI controller, first step (DESIGN §8) | [`control`] |
-//! | the integrator builder, the choice of backend ([`LinearPath`]), `solve` and the outputs of a run ([`output`]) | [`integrator`] |
+//! | the integrator builder, the choice of backend ([`LinearPath`]), `solve` and the outputs of a run ([`output`]), runs restarted on one stepper ([`Runs`]) | [`integrator`] |
 //! | ensembles: many initial states or parameter sets, in parallel with the feature `rayon` | [`ensemble`] |
 //! | typed errors | [`Error`], [`NewtonFailure`], [`SchemeError`] |
 //! | the reference of `#[forced_lagrangian]`, the promises of a run, bad input, export | [`guide`] |
