@@ -172,17 +172,23 @@ fn runs_after_failures_give_new_steppers_results() {
     ] {
         let mut runs = integ.runs();
         // Refused before any step (too many steps for the fixed run; the adaptive run
-        // stops at its cap mid-run), refused initial data, a run that ends well.
+        // stops at its cap mid-run), refused initial data and final times, a run of length
+        // zero, runs that end well.
         for (init, t) in [
             (good, 1.0),
             (bad, 1.0),
             (good, 1.0),
+            (good, f64::NAN),
             (good, 0.2),
+            (good, -1.0),
             (bad, 0.2),
+            (good, 0.0),
+            (good, 0.3),
         ] {
             let a = runs.solve(init, t, output::Records);
             let b = integ.solve(init, t, output::Records);
-            assert_eq!(a, b, "{init:?} to {t}");
+            // As text: an error that carries the NaN final time is not equal to itself.
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "{init:?} to {t}");
         }
         assert!(runs.solve(bad, 1.0, output::Final).is_err());
         assert!(runs.solve(good, 0.2, output::Final).is_ok());
