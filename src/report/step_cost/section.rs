@@ -175,6 +175,31 @@ fn diagnostics_table(md: &mut String, s: &Summary) {
             met(w <= 1.3)
         );
     }
+    // Issue 28's targets for the small-model step, with no diagnostics.
+    md.push_str("\n| target (issue 28) | goal | measured | verdict |\n|---|---|---|---|\n");
+    for (m, goal) in [("lobatto3", 250.0), ("lobatto5", 700.0)] {
+        if let Some(t) = find(m, "none").and_then(|r| r.generated) {
+            let _ = writeln!(
+                *md,
+                "| {m}, final state only | ≤ {goal:.0} ns per step | {t:.0} ns | {} |",
+                met(t <= goal)
+            );
+        }
+    }
+    let ratios: Vec<(f64, &str)> = super::SCHEMES
+        .iter()
+        .filter_map(|m| {
+            let r = find(m, "none")?;
+            Some((r.generated? / r.handwritten?, *m))
+        })
+        .collect();
+    if let Some((w, m)) = ratios.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0)) {
+        let _ = writeln!(
+            *md,
+            "| generated ÷ hand-written, final state only | ≤ 1.05 | worst {w:.2} ({m}) | {} |",
+            met(w <= 1.05)
+        );
+    }
 }
 
 /// Issue 14: the ensemble throughput on 1 and 2 threads.
