@@ -241,6 +241,14 @@ fn fmt_order(f: &Option<Fit>) -> String {
         .map_or("–".to_string(), |f| format!("{:.2}", f.order))
 }
 
+/// An order in q or p, marked `†` where it settled more than 0.3 from the scheme's.
+fn fmt_order_against(f: &Option<Fit>, expected: usize) -> String {
+    match f {
+        Some(f) if (f.order - expected as f64).abs() > 0.3 => format!("{:.2}†", f.order),
+        _ => fmt_order(f),
+    }
+}
+
 fn observed_orders(summary: &Summary) -> String {
     let mut md = format!(
         "### Observed orders\n\n\
@@ -252,7 +260,9 @@ fn observed_orders(summary: &Summary) -> String {
          within {} of the fit (`src/report/orders.rs`). A fit is shown only where it settles \
          the order: its slope's 95 % confidence half-width is at most {}, and its errors \
          fall by a factor {} or more across it; elsewhere a dash, and `orders.csv`'s note \
-         gives the unsettled fit. `orders.csv` holds the order in q.\n\n",
+         gives the unsettled fit. †: a fit that settled more than 0.3 from the scheme's \
+         order, a straight stretch that is not yet the asymptotic one (the energy balance \
+         need not converge at the scheme's order). `orders.csv` holds the order in q.\n\n",
         orders::FLOOR,
         orders::CEILING,
         orders::FLOOR_MARGIN,
@@ -268,8 +278,12 @@ fn observed_orders(summary: &Summary) -> String {
             col("method", |o: &OrderRow| format!("`{}`", o.method)),
             col("s", |o: &OrderRow| o.stages.to_string()),
             col("expected", |o: &OrderRow| o.expected.to_string()),
-            col("q", |o: &OrderRow| fmt_order(&o.observed[0])),
-            col("p", |o: &OrderRow| fmt_order(&o.observed[1])),
+            col("q", |o: &OrderRow| {
+                fmt_order_against(&o.observed[0], o.expected)
+            }),
+            col("p", |o: &OrderRow| {
+                fmt_order_against(&o.observed[1], o.expected)
+            }),
             col("energy", |o: &OrderRow| fmt_order(&o.observed[2])),
         ],
     ));
