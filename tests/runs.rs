@@ -153,6 +153,15 @@ fn runs_restarted_give_new_steppers_results_on_a_constrained_and_a_sparse_model(
         .linear_path(LinearPath::Sparse);
     assert_eq!(integ.path_for(&init), Ok(LinearPath::Sparse));
     compare("fpu sparse", &integ, &[(init, 2.0), (init, 1.0)]);
+    // The same model forced onto the dense backend restarts it; on `Auto`, where the backend
+    // is chosen at the initial state, every run makes its own.
+    let moved = InitialState::from_velocity([0.01; 8], [0.0; 8]);
+    for path in [LinearPath::Dense, LinearPath::Auto] {
+        let integ = Integrator::new(&fpu, Scheme::lobatto(3).unwrap(), 0.1)
+            .unwrap()
+            .linear_path(path);
+        compare(&format!("fpu {path:?}"), &integ, &[(init, 1.0), (moved, 0.5)]);
+    }
 }
 
 /// A run that fails, or whose initial data is refused, leaves the next run as a new

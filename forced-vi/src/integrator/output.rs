@@ -376,7 +376,8 @@ fn refuse_constraints<M: ForcedLagrangian<N>, const N: usize>(
 pub type Slot<'s, M, const N: usize> = Option<Stepper<'s, M, N>>;
 
 /// Opens the run's stepper and hands it to `visit`: the one in `slot` restarted
-/// ([`Stepper::restart`]) where it can be, else a new one, left in `slot` for the next run.
+/// ([`Stepper::restart`]) where the run takes the dense backend whatever its initial
+/// state, else a new one, left in `slot` for the next run.
 /// A run that cannot start is a failure with nothing computed, and leaves `slot` empty.
 fn open<'s, M: ForcedLagrangian<N>, const N: usize, R>(
     integ: &'s Integrator<'_, M, N>,
@@ -385,7 +386,9 @@ fn open<'s, M: ForcedLagrangian<N>, const N: usize, R>(
     t_final: f64,
     visit: impl FnOnce(&mut Stepper<'s, M, N>) -> Result<R, RunFailure<N>>,
 ) -> Result<R, RunFailure<N>> {
-    if let Some(stepper) = slot.as_mut() {
+    // Only where the backend does not depend on the initial state: a restart keeps it.
+    let keep = integ.dense_for_every_start();
+    if let Some(stepper) = slot.as_mut().filter(|_| keep) {
         match stepper.restart(init, t_final) {
             Ok(true) => return visit(stepper),
             Ok(false) => {}

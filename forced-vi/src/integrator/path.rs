@@ -81,6 +81,20 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         )
     }
 
+    /// Whether every run takes the dense backend whatever its initial state, so that a
+    /// stepper can be restarted from any other (see [`Integrator::runs`]): the sparse
+    /// backend's pattern, and with [`LinearPath::Auto`] the choice of backend itself, depend
+    /// on the initial state.
+    pub(super) fn dense_for_every_start(&self) -> bool {
+        match self.linear_path {
+            LinearPath::Dense => true,
+            LinearPath::Sparse => false,
+            LinearPath::Auto => {
+                self.model.sparse_node().is_none() || N < LinearPath::SPARSE_MIN_DOF
+            }
+        }
+    }
+
     /// The backend of a run from `init` with `scheme`, with its buffers.
     pub(super) fn backend<'s>(
         &'s self,

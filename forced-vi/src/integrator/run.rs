@@ -34,8 +34,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
     /// [`Runs::solve`] restarts the last run's stepper from its new initial state instead of
     /// making a new one, so a run of a few steps does not pay for its buffers each time
     /// (about 30 allocations on a small model, and the Newton iteration's set-up). The
-    /// results are those of [`Integrator::solve`], to the bit. The sparse backend, whose
-    /// pattern is recorded at a run's initial state, makes a new stepper for every run.
+    /// results are those of [`Integrator::solve`], to the bit. Where the backend depends on
+    /// the initial state, every run makes a new stepper: on the sparse backend, whose pattern
+    /// is recorded there, and for a model with sparse kernels on
+    /// [`LinearPath::Auto`](crate::LinearPath::Auto), which chooses its backend there.
     ///
     /// ```
     /// use forced_vi::prelude::*;
