@@ -160,7 +160,11 @@ fn runs_restarted_give_new_steppers_results_on_a_constrained_and_a_sparse_model(
         let integ = Integrator::new(&fpu, Scheme::lobatto(3).unwrap(), 0.1)
             .unwrap()
             .linear_path(path);
-        compare(&format!("fpu {path:?}"), &integ, &[(init, 1.0), (moved, 0.5)]);
+        compare(
+            &format!("fpu {path:?}"),
+            &integ,
+            &[(init, 1.0), (moved, 0.5)],
+        );
     }
 }
 
