@@ -1,7 +1,7 @@
 //! Tolerance proportionality on models the controller was not tuned on:
 //! `cargo run --release --example tolerance_sweep`.
 //!
-//! Twenty-two small forced models, none of them a report scene, each run adaptively with
+//! Twenty-seven small forced models, none of them a report scene, each run adaptively with
 //! lobatto3–7 and with `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12:
 //! nine the controller was measured on when it was last changed, three that amplify errors
 //! over the run (the eccentric Kepler orbit over two lengths), added after that change, and
@@ -9,22 +9,29 @@
 //! oscillator, two coupled oscillators of frequencies 1 and 12, a bead on a rotating hoop, a
 //! spherical pendulum, an over-damped oscillator, an oscillator of amplitude 1000, a Morse
 //! oscillator, a linear oscillator driven near resonance, a Kepler orbit of eccentricity
-//! about 0.8, a double well). The final error in `q` (max-norm) is taken against fixed-step
+//! about 0.8, a double well), and a second held-out set of five of kinds the others lack,
+//! added later that day, again with no change to the controller (a pendulum whose gravity
+//! oscillates, two unequal masses joined by a damper, a charge in a magnetic field driven by
+//! an electric one with quadratic drag, a relativistic oscillator, a softened Kepler
+//! potential). The final error in `q` (max-norm) is taken against fixed-step
 //! lobatto7 at `h = 2e-3`, checked against lobatto6 at `h = 1e-3`. A sweep's slope is the
 //! least-squares slope of log(error) against log(tol) over its runs of at least 4 steps
 //! whose error is above `1e-13 · max(1, |q_ref|)`, as in the report. The last lines count
-//! the slopes outside 0.8–1.2 (issue 23's target), for the held-out set and for all, and
+//! the slopes outside 0.8–1.2 (issue 23's target), for each held-out set and for all, and
 //! give the largest final error over its tolerance.
 //!
-//! Measured on 2026-11-29: 138 sweeps, 4 slopes outside 0.8–1.2, the largest final error
-//! 7.83 times the tolerance. In the held-out set, 3 of its 60 slopes are outside, all on the
-//! over-damped oscillator (lobatto6 0.57, lobatto7 0.32, `auto` 0.70), and its largest
+//! Measured on 2026-11-29: 168 sweeps, 5 slopes outside 0.8–1.2, the largest final error
+//! 7.83 times the tolerance. In the held-out set, 3 of its 60 slopes are outside, all on
+//! the over-damped oscillator (lobatto6 0.57, lobatto7 0.32, `auto` 0.70), and its largest
 //! final error is 1.87 times the tolerance (the double well, lobatto5 at 1e-3). There those
 //! runs take 6 to 23 steps and end 1e-9 to 1e-3 times the tolerance off: each step's
 //! estimate matches its local error (traced for lobatto7 at 1e-3: 1.1e-4 of the tolerance
 //! against 1.2e-4), but the flow damps the errors (its modes decay as e^(−0.38 t) and
 //! e^(−2.6 t)), so the final error is what the last few steps leave, and their sizes move in
-//! jumps as the tolerance changes.
+//! jumps as the tolerance changes. In the second held-out set, 1 of its 30 slopes is outside
+//! (the relativistic oscillator's lobatto7, 0.78: its runs at the looser tolerances take 15
+//! to 20 steps and end far below the tolerance), and its largest final error is 1.98 times
+//! the tolerance (the softened Kepler potential, lobatto7 at 1e-4).
 use forced_vi::prelude::*;
 
 /// A pendulum with linear drag.
@@ -217,6 +224,56 @@ struct Kepler08 {}
 )]
 struct DoubleWell {}
 
+/// A pendulum whose gravity oscillates (a Lagrangian that reads the time), with drag
+/// (second held-out set of 2026-11-29, as the five after it).
+#[forced_lagrangian(
+    coordinates(th),
+    lagrangian = 0.5 * th_dot * th_dot + (1.0 + 0.3 * (2.0 * t).cos()) * th.cos(),
+    force(th = -0.05 * th_dot)
+)]
+struct Parametric {}
+
+/// Two masses (2 and 0.5) on a soft and a hardening spring, joined by a damper (a constant
+/// mass matrix other than the identity; internal forces).
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (2.0 * x_dot * x_dot + 0.5 * y_dot * y_dot)
+        - 0.5 * x * x
+        - 0.5 * (y - x) * (y - x)
+        - 0.1 * (y - x) * (y - x) * (y - x) * (y - x),
+    force(x = 0.02 * (y_dot - x_dot), y = -0.02 * (y_dot - x_dot))
+)]
+struct TwoMass {}
+
+/// A charge in a uniform magnetic field, pushed by an oscillating electric field, with
+/// quadratic drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 0.75 * (x * y_dot - y * x_dot),
+    force(
+        x = -0.1 * x_dot * (x_dot * x_dot + y_dot * y_dot).sqrt() + 0.3 * t.cos(),
+        y = -0.1 * y_dot * (x_dot * x_dot + y_dot * y_dot).sqrt()
+    )
+)]
+struct Lorentz {}
+
+/// A relativistic oscillator, `L = −√(1 − v²) − x² / 2`, with drag: a mass that depends on
+/// the velocity.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = -(1.0 - x_dot * x_dot).sqrt() - 0.5 * x * x,
+    force(x = -0.05 * x_dot)
+)]
+struct Relativistic {}
+
+/// A softened Kepler potential `1 / √(r² + 0.1)` with weak drag.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 1.0 / (x * x + y * y + 0.1).sqrt(),
+    force(x = -0.02 * x_dot, y = -0.02 * y_dot)
+)]
+struct SoftKepler {}
+
 /// One sweep's summary.
 struct Sweep {
     slope: Option<f64>,
@@ -224,6 +281,23 @@ struct Sweep {
     /// Accepted and rejected steps over the sweep's runs.
     steps: usize,
     rejected: usize,
+}
+
+/// Prints a set's sweeps, its slopes outside 0.8–1.2 and its largest final error.
+fn summarise(label: &str, set: &[Sweep]) {
+    let slopes: Vec<f64> = set.iter().filter_map(|s| s.slope).collect();
+    let out: Vec<String> = slopes
+        .iter()
+        .filter(|k| !(0.8..=1.2).contains(*k))
+        .map(|k| format!("{k:.2}"))
+        .collect();
+    let worst = set.iter().map(|s| s.worst).fold(0.0, f64::max);
+    println!(
+        "{label}: {} sweeps, {} slopes outside 0.8–1.2 ({}); largest final error {worst:.2} tol",
+        slopes.len(),
+        out.len(),
+        out.join(", ")
+    );
 }
 
 /// The least-squares slope of `ln y` against `ln x`.
@@ -416,19 +490,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         held[9].1,
         &mut all,
     )?;
-    let late: Vec<f64> = all[before..].iter().filter_map(|s| s.slope).collect();
-    let late_out: Vec<String> = late
-        .iter()
-        .filter(|k| !(0.8..=1.2).contains(*k))
-        .map(|k| format!("{k:.2}"))
-        .collect();
-    let late_worst = all[before..].iter().map(|s| s.worst).fold(0.0, f64::max);
-    println!(
-        "held-out set of 2026-11-29: {} sweeps, {} slopes outside 0.8–1.2 ({}); largest final error {late_worst:.2} tol",
-        late.len(),
-        late_out.len(),
-        late_out.join(", ")
-    );
+    let second = all.len();
+    // A second held-out set of five, of kinds the others lack, added later on 2026-11-29,
+    // again with no change to the controller.
+    let p = one(0.6, 0.0);
+    sweep_model("parametric", &Parametric {}, p, 15.0, &mut all)?;
+    let tm = two([1.0, -0.5], [0.0, 0.0]);
+    sweep_model("two_mass", &TwoMass {}, tm, 15.0, &mut all)?;
+    let lz = two([0.0, 0.0], [1.0, 0.0]);
+    sweep_model("lorentz", &Lorentz {}, lz, 15.0, &mut all)?;
+    let rel = one(0.5, 0.5);
+    sweep_model("relativistic", &Relativistic {}, rel, 15.0, &mut all)?;
+    let sk = two([1.0, 0.0], [0.0, 0.8]);
+    sweep_model("soft_kepler", &SoftKepler {}, sk, 15.0, &mut all)?;
+    summarise("held-out set of 2026-11-29", &all[before..second]);
+    summarise("second held-out set of 2026-11-29", &all[second..]);
     let slopes: Vec<f64> = all.iter().filter_map(|s| s.slope).collect();
     let outside = slopes.iter().filter(|k| !(0.8..=1.2).contains(*k)).count();
     let mean = slopes.iter().map(|k| (k - 1.0).abs()).sum::<f64>() / slopes.len().max(1) as f64;
