@@ -14,6 +14,8 @@ mod extreme_props;
 mod final_state;
 #[path = "generated_models.rs"]
 mod generated_models;
+#[path = "held_out.rs"]
+mod held_out;
 #[path = "macro_kernels.rs"]
 mod macro_kernels;
 #[path = "predictor.rs"]
