@@ -180,14 +180,21 @@ pub enum Error {
         /// The step it needed.
         h: f64,
     },
-    /// An adaptive run whose tolerance lies so close to `f64` round-off that the rounding
-    /// errors of its steps, added up as a random walk (`sqrt(Σ_k (2ε|y_k|)²)` in the
-    /// tolerance's weighted norm), or the differences its error estimates left out as
-    /// round-off, added up, would pass three times the tolerance: the run stops before that
-    /// step, so that no `Ok` claims an accuracy the arithmetic cannot give (see
-    /// [`crate::control`]). Fewer steps (more stages) or a looser tolerance get further.
+    /// An adaptive run that cannot show its error to be within a tolerance so close to `f64`
+    /// round-off: the bounds on the rounding errors of its steps, added up as a random walk
+    /// (`sqrt(Σ_k (2ε|y_k|)²)` in the tolerance's weighted norm), or the differences its
+    /// error estimates left out as round-off, added up, would pass three times the
+    /// tolerance. The run stops before that step, so that no `Ok` claims an accuracy the
+    /// arithmetic may not give (see [`crate::control`]). Fewer steps (more stages) or a
+    /// looser tolerance get further. These are bounds, summed as if nothing damped them:
+    /// where the flow damps what the steps round (a stiff spring under heavy damping), the
+    /// run's actual round-off can stay far below them, and a run that was accurate stops
+    /// (measured on a held-out elastic pendulum with a radial spring of 10⁸ and a radial
+    /// damper of 10⁶, T = 20: lobatto8 at tol 1e-7 stops after 4245 steps, at t = 13.9,
+    /// where at 1e-5 and 1e-6 it ends within 3.6e-15 of fixed-step lobatto6 and lobatto8,
+    /// which agree to 1.4e-15).
     #[error(
-        "the round-off of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: the tolerance is too close to f64 round-off for this run; loosen it or use more stages"
+        "the round-off bounds of {steps} steps would reach {ratio:.2} times the tolerance at t = {t}: this run cannot tell its error from f64 round-off at this tolerance; loosen it or use more stages"
     )]
     ToleranceBelowRoundOff {
         /// Where the run stopped.
