@@ -227,55 +227,10 @@ struct Kepler08 {}
 )]
 struct DoubleWell {}
 
-/// A pendulum whose gravity oscillates (a Lagrangian that reads the time), with drag
-/// (second held-out set of 2026-11-29, as the five after it).
-#[forced_lagrangian(
-    coordinates(th),
-    lagrangian = 0.5 * th_dot * th_dot + (1.0 + 0.3 * (2.0 * t).cos()) * th.cos(),
-    force(th = -0.05 * th_dot)
-)]
-struct Parametric {}
-
-/// Two masses (2 and 0.5) on a soft and a hardening spring, joined by a damper (a constant
-/// mass matrix other than the identity; internal forces).
-#[forced_lagrangian(
-    coordinates(x, y),
-    lagrangian = 0.5 * (2.0 * x_dot * x_dot + 0.5 * y_dot * y_dot)
-        - 0.5 * x * x
-        - 0.5 * (y - x) * (y - x)
-        - 0.1 * (y - x) * (y - x) * (y - x) * (y - x),
-    force(x = 0.02 * (y_dot - x_dot), y = -0.02 * (y_dot - x_dot))
-)]
-struct TwoMass {}
-
-/// A charge in a uniform magnetic field, pushed by an oscillating electric field, with
-/// quadratic drag.
-#[forced_lagrangian(
-    coordinates(x, y),
-    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 0.75 * (x * y_dot - y * x_dot),
-    force(
-        x = -0.1 * x_dot * (x_dot * x_dot + y_dot * y_dot).sqrt() + 0.3 * t.cos(),
-        y = -0.1 * y_dot * (x_dot * x_dot + y_dot * y_dot).sqrt()
-    )
-)]
-struct Lorentz {}
-
-/// A relativistic oscillator, `L = −√(1 − v²) − x² / 2`, with drag: a mass that depends on
-/// the velocity.
-#[forced_lagrangian(
-    coordinates(x),
-    lagrangian = -(1.0 - x_dot * x_dot).sqrt() - 0.5 * x * x,
-    force(x = -0.05 * x_dot)
-)]
-struct Relativistic {}
-
-/// A softened Kepler potential `1 / √(r² + 0.1)` with weak drag.
-#[forced_lagrangian(
-    coordinates(x, y),
-    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) + 1.0 / (x * x + y * y + 0.1).sqrt(),
-    force(x = -0.02 * x_dot, y = -0.02 * y_dot)
-)]
-struct SoftKepler {}
+// The second held-out set (shared with `tests/held_out.rs`).
+#[path = "../tests/held_out_models.rs"]
+mod held_out_models;
+use held_out_models::{Lorentz, Parametric, Relativistic, SoftKepler, TwoMass};
 
 /// One sweep's summary.
 struct Sweep {

@@ -19,6 +19,7 @@
 //! line's middle adaptive run and the two fixed runs around its error are also timed again
 //! together ([`middle_runs`], [`Timed`]), and that ratio is the one read against the target.
 
+pub use super::rows::Timed;
 use super::rows::{Mode, Row, Summary};
 use crate::report::timing::median;
 use crate::report::Method;
@@ -57,23 +58,6 @@ pub fn fixed_at(fixed: &[&Row], err: f64, value: impl Fn(&Row) -> f64) -> Option
     let (r0, r1, x) = bracket(fixed, err)?;
     let (v0, v1) = (value(r0), value(r1));
     (v0 > 0.0 && v1 > 0.0).then(|| log_between(v0, v1, x))
-}
-
-/// One line's middle adaptive run and the two fixed runs around its error, timed again
-/// together (see [`super::sweep::time_again`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Timed {
-    /// The scene.
-    pub scene: &'static str,
-    /// The scheme.
-    pub method: Method,
-    /// The adaptive run's tolerance.
-    pub tol: f64,
-    /// Rounds timed.
-    pub rounds: usize,
-    /// The adaptive run's median time over the fixed curve's at its error, or why a run
-    /// failed this time.
-    pub ratio: Result<f64, String>,
 }
 
 /// The runs that [`Timed`] times for a line: its middle adaptive run (by tolerance), the two

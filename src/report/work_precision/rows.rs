@@ -185,10 +185,27 @@ pub struct Summary {
     pub paired: Vec<Paired>,
     /// Each adaptive-against-fixed line's middle run and its fixed curve timed again
     /// together (see [`super::equal_error`]).
-    pub equal_error: Vec<super::equal_error::Timed>,
+    pub equal_error: Vec<Timed>,
     /// The paired variational runs on the scenes heyoka ran, timed with a new stepper and
     /// with a restarted one (see [`Restarted`]).
     pub restarted: Vec<Restarted>,
+}
+
+/// One line's middle adaptive run and the two fixed runs around its error, timed again
+/// together (see [`super::sweep::time_again`] and [`super::equal_error`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Timed {
+    /// The scene.
+    pub scene: &'static str,
+    /// The scheme.
+    pub method: Method,
+    /// The adaptive run's tolerance.
+    pub tol: f64,
+    /// Rounds timed.
+    pub rounds: usize,
+    /// The adaptive run's median time over the fixed curve's at its error, or why a run
+    /// failed this time.
+    pub ratio: Result<f64, String>,
 }
 
 /// A paired variational run ([`Paired`]) timed again two ways: built anew each run, as the
