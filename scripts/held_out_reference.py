@@ -1,6 +1,7 @@
 """References for tests/held_out.rs: the end states (q, p) of the second held-out set of
-examples/tolerance_sweep.rs, from equations of motion written out by hand (not from the
-Lagrangians through forced-vi).
+examples/tolerance_sweep.rs, and of a spherical pendulum written in Cartesian coordinates
+with a constraint, from equations of motion written out by hand (not from the Lagrangians
+through forced-vi; the pendulum's in its two angles).
 
 mpmath's Taylor-series solver (`odefun`) at 25 and at 30 digits; the test takes the
 30-digit values rounded to f64. The script prints how far the 25-digit run and scipy's DOP853
@@ -43,6 +44,20 @@ def soft_kepler(t, y, m):
     return [vx, vy, -x / r3 - m.mpf("0.02") * vx, -yy / r3 - m.mpf("0.02") * vy]
 
 
+def spherical(t, y, m):
+    th, ph, w, u = y
+    s, c = m.sin(th), m.cos(th)
+    d = m.mpf("0.2")
+    return [w, u, s * c * u * u - m.mpf("9.81") * s - d * w, -2 * c / s * w * u - d * u]
+
+
+def spherical_cartesian(y, m):
+    """(x, y, z) and their velocities (the momenta: unit mass) from the angles."""
+    th, ph, w, u = y
+    s, c, sp, cp = m.sin(th), m.cos(th), m.sin(ph), m.cos(ph)
+    return [s * cp, s * sp, -c], [c * w * cp - s * sp * u, c * w * sp + s * cp * u, s * w]
+
+
 # (name, right-hand side, q0, v0, T, momenta from (q, v))
 MODELS = [
     ("parametric", parametric, ["0.6"], ["0"], 15, lambda q, v, m: [v[0]]),
@@ -68,6 +83,11 @@ def end_state(f, q0, v0, T, momenta, dps):
     y = sol(T)
     return [float(x) for x in list(y[:n]) + momenta(y[:n], y[n:], mp)]
 
+
+mp.mp.dps = 30
+sol = mp.odefun(lambda t, y: spherical(t, y, mp), 0, [mp.mpf(1), mp.mpf(0), mp.mpf(0), mp.mpf(2)])
+q, p = spherical_cartesian(sol(10), mp)
+print(f"spherical_cartesian: q = {[float(x) for x in q]!r}, p = {[float(x) for x in p]!r}")
 
 for name, f, q0, v0, T, momenta in MODELS:
     n = len(q0)

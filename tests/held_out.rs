@@ -1,7 +1,9 @@
 //! Error control on held-out models: the second held-out set of `examples/tolerance_sweep.rs`
 //! (five small forced models of kinds the report's scenes and the controller's tuning set
 //! lack), against references from their equations of motion written out by hand and solved
-//! at 30 digits (`scripts/held_out_reference.py`, mpmath). Adaptive lobatto3–7 and
+//! at 30 digits (`scripts/held_out_reference.py`, mpmath); and a constrained model, a spherical
+//! pendulum with drag written in Cartesian coordinates with one constraint, against its
+//! equations in the two angles. Adaptive lobatto3–7 and
 //! `Integrator::auto` at `rtol = atol = tol` for tol = 1e-3 … 1e-12: every run ends `Ok`
 //! within 10 times the tolerance in every position and momentum (in the tolerance's own
 //! weights), and the slopes of log(error) against log(tol) lie in 0.8–1.2 (measured when
@@ -15,8 +17,15 @@ use forced_vi::prelude::*;
 mod held_out_models;
 use held_out_models::{Lorentz, Parametric, Relativistic, SoftKepler, TwoMass};
 
-/// The run's length, the same for all five.
-const T: f64 = 15.0;
+/// A spherical pendulum (unit mass and length) with drag, in Cartesian coordinates with one
+/// constraint.
+#[forced_lagrangian(
+    coordinates(x, y, z),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot + z_dot * z_dot) - 9.81 * z,
+    force(x = -0.2 * x_dot, y = -0.2 * y_dot, z = -0.2 * z_dot),
+    constraints(0.5 * (x * x + y * y + z * z - 1.0))
+)]
+struct SphericalCartesian {}
 
 /// One sweep: `(model, scheme, slope)`, the slope `None` with fewer than three runs to fit.
 type Slope = (&'static str, String, Option<f64>);
@@ -34,12 +43,12 @@ fn slope(pts: &[(f64, f64)]) -> Option<f64> {
     (pts.len() >= 3).then(|| sxy / sxx)
 }
 
-/// Runs lobatto3–7 and `auto` over the tolerances on `model` from `init` to [`T`], checks
+/// Runs lobatto3–7 and `auto` over the tolerances on `model` from `init` to `t_final`, checks
 /// each end state against `(q_ref, p_ref)` and returns the sweeps' slopes.
 fn sweep<M: ForcedLagrangian<N>, const N: usize>(
     name: &'static str,
     model: &M,
-    init: InitialState<N>,
+    (init, t_final): (InitialState<N>, f64),
     (q_ref, p_ref): ([f64; N], [f64; N]),
 ) -> Vec<Slope> {
     let mut slopes = Vec::new();
@@ -54,7 +63,7 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
             }
             .unwrap();
             let end = integ
-                .final_state(init, T)
+                .final_state(init, t_final)
                 .unwrap_or_else(|f| panic!("{name} {label} tol {tol:e}: {}", f.error));
             // In the tolerance's weights: `atol + rtol |y|` with rtol = atol = tol.
             let pairs = (end.q.iter().zip(&q_ref)).chain(end.p.iter().zip(&p_ref));
@@ -81,8 +90,8 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
 
 #[test]
 fn adaptive_held_out_models_end_within_the_tolerance_and_in_proportion() {
-    let one = |x: f64, v: f64| InitialState::from_velocity([x], [v]);
-    let two = |x: [f64; 2], v: [f64; 2]| InitialState::from_velocity(x, v);
+    let one = |x: f64, v: f64| (InitialState::from_velocity([x], [v]), 15.0);
+    let two = |x: [f64; 2], v: [f64; 2]| (InitialState::from_velocity(x, v), 15.0);
     // `scripts/held_out_reference.py`.
     let mut slopes = sweep(
         "parametric",
@@ -121,6 +130,28 @@ fn adaptive_held_out_models_end_within_the_tolerance_and_in_proportion() {
         (
             [-0.2190111855074056, -0.4177359679247445],
             [1.0375559095803257, -0.7270411966032397],
+        ),
+    ));
+    // At θ = 1, φ = 0 with φ' = 2: `(sin 1, 0, −cos 1)`, velocity `(0, 2 sin 1, 0)`.
+    let (s1, c1) = 1f64.sin_cos();
+    slopes.extend(sweep(
+        "spherical_cartesian",
+        &SphericalCartesian {},
+        (
+            InitialState::from_velocity([s1, 0.0, -c1], [0.0, 2.0 * s1, 0.0]),
+            10.0,
+        ),
+        (
+            [
+                -0.032556223254490466,
+                0.21844993856624265,
+                -0.9753049352217021,
+            ],
+            [
+                -0.9359982624384221,
+                0.39360000694414554,
+                0.11940313385978076,
+            ],
         ),
     ));
     let outside: Vec<String> = slopes
