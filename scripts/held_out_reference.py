@@ -1,7 +1,8 @@
 """References for tests/held_out.rs: the end states (q, p) of the second held-out set of
-examples/tolerance_sweep.rs, and of a spherical pendulum written in Cartesian coordinates
-with a constraint, from equations of motion written out by hand (not from the Lagrangians
-through forced-vi; the pendulum's in its two angles).
+examples/tolerance_sweep.rs, and of two constrained models written in Cartesian coordinates
+(a spherical pendulum, a bead on the parabola y = x²), from equations of motion written out by
+hand (not from the Lagrangians through forced-vi; the constrained ones in their free
+coordinates: the pendulum's two angles, the bead's x).
 
 mpmath's Taylor-series solver (`odefun`) at 25 and at 30 digits; the test takes the
 30-digit values rounded to f64. The script prints how far the 25-digit run and scipy's DOP853
@@ -58,6 +59,12 @@ def spherical_cartesian(y, m):
     return [s * cp, s * sp, -c], [c * w * cp - s * sp * u, c * w * sp + s * cp * u, s * w]
 
 
+def bead(t, y, m):
+    x, v = y
+    k = 1 + 4 * x * x
+    return [v, (-4 * x * v * v - 2 * m.mpf("9.81") * x - m.mpf("0.1") * k * v) / k]
+
+
 # (name, right-hand side, q0, v0, T, momenta from (q, v))
 MODELS = [
     ("parametric", parametric, ["0.6"], ["0"], 15, lambda q, v, m: [v[0]]),
@@ -88,6 +95,8 @@ mp.mp.dps = 30
 sol = mp.odefun(lambda t, y: spherical(t, y, mp), 0, [mp.mpf(1), mp.mpf(0), mp.mpf(0), mp.mpf(2)])
 q, p = spherical_cartesian(sol(10), mp)
 print(f"spherical_cartesian: q = {[float(x) for x in q]!r}, p = {[float(x) for x in p]!r}")
+x, v = mp.odefun(lambda t, y: bead(t, y, mp), 0, [mp.mpf(1), mp.mpf(0)])(10)
+print(f"bead_on_parabola: q = {[float(x), float(x * x)]!r}, p = {[float(v), float(2 * x * v)]!r}")
 
 for name, f, q0, v0, T, momenta in MODELS:
     n = len(q0)
