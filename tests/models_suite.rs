@@ -28,6 +28,8 @@ mod sensitivity;
 mod sparse;
 #[path = "sparse_macro.rs"]
 mod sparse_macro;
+#[path = "trust_limits.rs"]
+mod trust_limits;
 #[path = "trust_macro.rs"]
 mod trust_macro;
 #[path = "trust_runtime.rs"]

@@ -449,8 +449,15 @@ impl<const N: usize> Tolerance<N> {
     /// is not cannot meet it (the run ends in [`Error::StepSizeTooSmall`] there); give an
     /// `atol` to components that cross zero.
     pub fn per_component(rtol: [f64; N], atol: [f64; N]) -> Result<Self, Error> {
-        for i in 0..N {
-            let (r, a) = (rtol[i], atol[i]);
+        let tol = Tolerance { rtol, atol };
+        tol.check()?;
+        Ok(tol)
+    }
+
+    /// The checks of [`Self::per_component`], for tolerances made otherwise (from the public
+    /// fields, or deserialized).
+    pub(crate) fn check(&self) -> Result<(), Error> {
+        for (i, (&r, &a)) in self.rtol.iter().zip(&self.atol).enumerate() {
             let ok = r.is_finite() && a.is_finite() && r >= 0.0 && a >= 0.0 && r + a > 0.0;
             if !ok {
                 return Err(Error::InvalidTolerance {
@@ -460,7 +467,7 @@ impl<const N: usize> Tolerance<N> {
                 });
             }
         }
-        Ok(Tolerance { rtol, atol })
+        Ok(())
     }
 
     /// The weighted RMS norm of the estimated local error `(dq, dp)` of a step that ended

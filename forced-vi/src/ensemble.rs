@@ -98,25 +98,29 @@ where
     {
         // Each worker runs its members on one stepper, restarted member to member
         // (`Integrator::runs`): the same results as a new stepper per member.
+        // Each value is boxed on the run's own stack (see `run_stack_bytes`): on its way
+        // through the workers' collection it is a pointer, not `[f64; N]` arrays copied on
+        // a worker's stack (a final state of 16384 coordinates overflowed one).
+        let need = crate::stack::run_stack_bytes(N);
+        let one = |runs: &mut super::Runs<'_, '_, M, N>, init: &InitialState<N>| {
+            crate::stack::with_stack(need, || {
+                Box::new(runs.solve(*init, t_final, output.clone()))
+            })
+        };
         #[cfg(feature = "rayon")]
-        {
+        let boxed: Vec<_> = {
             use rayon::prelude::*;
             members
                 .par_iter()
-                .map_init(
-                    || self.runs(),
-                    |runs, init| runs.solve(*init, t_final, output.clone()),
-                )
+                .map_init(|| self.runs(), |runs, init| one(runs, init))
                 .collect()
-        }
+        };
         #[cfg(not(feature = "rayon"))]
-        {
+        let boxed: Vec<_> = {
             let mut runs = self.runs();
-            members
-                .iter()
-                .map(|init| runs.solve(*init, t_final, output.clone()))
-                .collect()
-        }
+            members.iter().map(|init| one(&mut runs, init)).collect()
+        };
+        boxed.into_iter().map(|value| *value).collect()
     }
 
     /// `ensemble(members, t_final, output::Records)`.

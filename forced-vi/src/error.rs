@@ -148,6 +148,20 @@ pub enum Error {
         /// The cap on them.
         max: usize,
     },
+    /// A sensitivity run of a model with parameters whose dual numbers, over every
+    /// coordinate and one parameter, would need more stack than
+    /// [`crate::MAX_KERNEL_STACK`] (they grow like `N²`): refused before the first step.
+    #[error(
+        "the sensitivities in the parameters of a model of {dof} coordinates need {stack_bytes} bytes of stack for their dual numbers (at most {max})"
+    )]
+    SensitivitiesTooLarge {
+        /// The model's coordinates `N`.
+        dof: usize,
+        /// The stack the parameters' kernels need.
+        stack_bytes: usize,
+        /// The cap on it.
+        max: usize,
+    },
     /// A tolerance is negative, not finite, or zero together with its partner.
     #[error(
         "tolerance of coordinate {index} is invalid (rtol = {rtol}, atol = {atol}): both must be finite and non-negative, not both zero"
@@ -313,7 +327,9 @@ pub enum Error {
         step: usize,
         /// The time.
         t: f64,
-        /// What overflowed: `q`, `p`, `v`, `energy`, `energy_balance` or `state`.
+        /// What overflowed: `q`, `p`, `v`, `energy`, `energy_balance` or `state`; in a
+        /// sensitivity run, `tangent` (the derivatives of the flow) or `adjoint` (the
+        /// backward pass of a loss's gradient).
         quantity: &'static str,
     },
     /// The Newton solve of a step failed (after any subdivisions). Besides a model that
@@ -384,6 +400,7 @@ impl Error {
             Error::TooManySteps { .. } => "too_many_steps".into(),
             Error::TooManyRecords { .. } => "too_many_records".into(),
             Error::ModelTooLarge { .. } => "model_too_large".into(),
+            Error::SensitivitiesTooLarge { .. } => "sensitivities_too_large".into(),
             Error::VelocitySolveFailed { .. } => "velocity_solve_failed".into(),
             Error::Overflow { .. } => "overflow".into(),
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),
@@ -402,6 +419,23 @@ impl Error {
     pub(crate) fn outside_pattern() -> Error {
         Error::InvalidModel {
             message: "the sparse node or constraint kernels wrote outside the pattern recorded at the first evaluation (their entries must not depend on the state)".into(),
+        }
+    }
+
+    /// This error at step `k`, for the errors of a computation that knew no step (made
+    /// with step 0).
+    pub(crate) fn at_step(self, k: usize) -> Error {
+        match self {
+            Error::Overflow { t, quantity, .. } => Error::Overflow {
+                step: k,
+                t,
+                quantity,
+            },
+            Error::NonFiniteModel { t, .. } => Error::NonFiniteModel { step: k, t },
+            Error::SingularMassMatrix { t, rcond, .. } => {
+                Error::SingularMassMatrix { step: k, t, rcond }
+            }
+            other => other,
         }
     }
 }

@@ -299,6 +299,11 @@ impl<const N: usize> InitialState<N> {
         q: [f64; N],
         v: [f64; N],
     ) -> Result<Self, Error> {
+        if N == 0 {
+            return Err(Error::InvalidModel {
+                message: "the model has no coordinates (N = 0)".into(),
+            });
+        }
         // The user's data, named as such (not as a value the model returned).
         for (what, x) in [("q", &q[..]), ("v", &v[..])] {
             if let Some(index) = x.iter().position(|c| !c.is_finite()) {

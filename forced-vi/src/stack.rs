@@ -8,6 +8,25 @@ pub(crate) fn with_stack<R>(need: usize, f: impl FnOnce() -> R) -> R {
     if need <= 256 * 1024 {
         f()
     } else {
-        stacker::maybe_grow(need, need.saturating_mul(2), f)
+        // `f` behind a call that is never inlined: inlined into the test of the stack left,
+        // its frame would be the caller's, probed on entry before the test could move it
+        // (an ensemble of 8192 coordinates overflowed a worker's 2 MiB that way).
+        stacker::maybe_grow(need, need.saturating_mul(2), || on_this_stack(f))
     }
+}
+
+/// Calls `f` in a frame of its own.
+#[inline(never)]
+fn on_this_stack<R>(f: impl FnOnce() -> R) -> R {
+    f()
+}
+
+/// The stack that a run of a model of `n` coordinates may take outside its kernels: its
+/// set-up and its outputs hold copies of `[f64; n]` values (initial states, records, dense
+/// states), about 80 of them on the deepest path (measured with n = 131072, whose frames
+/// took 12.6 to 27 MB each on the caller's stack), here with 2.5 times that to spare. Below
+/// 129 coordinates this is at most 256 KiB, and [`with_stack`] runs on the caller's stack.
+#[inline]
+pub(crate) const fn run_stack_bytes(n: usize) -> usize {
+    n.saturating_mul(2048)
 }

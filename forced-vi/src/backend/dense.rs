@@ -546,6 +546,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
                 dv.copy_from_slice(x.as_slice());
                 Ok(())
             }
+            // A well-conditioned mass: the direction itself is beyond `f64`'s range.
+            Some((_, rcond)) if rcond >= MIN_MASS_RCOND => {
+                let size = dq.iter().chain(dp).fold(0.0f64, |m, x| m.max(x.abs()));
+                Err(crate::stepper::non_finite(size, 0, t, "tangent"))
+            }
             other => Err(Error::SingularMassMatrix {
                 step: 0,
                 t,

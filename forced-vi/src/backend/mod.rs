@@ -110,6 +110,19 @@ pub(crate) enum StepFailure {
     OutsidePattern,
     /// What a run keeps per step (an adjoint's tape) no longer fits in memory.
     Memory { records: usize },
+    /// The tangent of a sensitivity run left the range of `f64` over the step (a flow that
+    /// stretches perturbations without bound, as a chaotic one does over a long run).
+    TangentOverflow,
+}
+
+impl StepFailure {
+    /// A failure that a smaller step would not avoid: the run ends at once.
+    pub(crate) fn is_fatal(self) -> bool {
+        matches!(
+            self,
+            StepFailure::OutsidePattern | StepFailure::Memory { .. } | StepFailure::TangentOverflow
+        )
+    }
 }
 
 /// The linear algebra of a step. Slices of positions, velocities and momenta have the

@@ -97,12 +97,18 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// An integrator with step `h`. Defaults: [`StepOptions::default`], fixed steps,
     /// [`LinearPath::Auto`].
     ///
-    /// Fails if `h` is not finite and at least [`StepOptions::SMALLEST_STEP`], a model parameter
+    /// Fails if the model has no coordinates, `h` is not finite and at least
+    /// [`StepOptions::SMALLEST_STEP`], a model parameter
     /// is not finite, the model's own check fails ([`ForcedLagrangian::check_model`]), it
     /// declares constraints while promising none ([`ForcedLagrangian::CONSTRAINED`]), or its
     /// kernels need more than [`MAX_KERNEL_STACK`] bytes of stack (for a model with sparse
     /// kernels, only when a run takes the dense path).
     pub fn new(model: &'m M, scheme: Scheme, h: f64) -> Result<Self, Error> {
+        if N == 0 {
+            return Err(Error::InvalidModel {
+                message: "the model has no coordinates (N = 0)".into(),
+            });
+        }
         if !(h.is_finite() && h >= StepOptions::SMALLEST_STEP) {
             return Err(Error::InvalidStepSize { h });
         }
@@ -236,6 +242,9 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     }
 
     /// Makes the run adaptive with tolerances per coordinate (see [`Self::tolerances`]).
+    /// Tolerances that [`Tolerance::per_component`] would refuse (built from the public
+    /// fields, or deserialized) make every run fail with [`Error::InvalidTolerance`] before
+    /// its first step.
     #[must_use]
     pub fn tolerance(mut self, tolerance: Tolerance<N>) -> Self {
         self.tolerance = Some(tolerance);
@@ -292,6 +301,23 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// first, that holds only the current state. It runs on the backend that
     /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
+        let init = &init;
+        crate::stack::with_stack(crate::stack::run_stack_bytes(N), move || {
+            self.stepper_here(*init, t_final)
+        })
+    }
+
+    /// [`Self::stepper`] on the current stack.
+    fn stepper_here(
+        &self,
+        init: InitialState<N>,
+        t_final: f64,
+    ) -> Result<Stepper<'_, M, N>, Error> {
+        // Tolerances made without their constructors (public fields, or deserialized) are
+        // checked here, before any step, as `Tolerance::per_component` checks them.
+        if let Some(tol) = &self.tolerance {
+            tol.check()?;
+        }
         let newton = self.options.newton;
         let backend = self.backend(&init, &self.scheme, newton)?;
         // The error estimate's one Newton iteration (see `crate::control`).

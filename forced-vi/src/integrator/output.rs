@@ -368,12 +368,22 @@ fn refuse_constraints<M: ForcedLagrangian<N>, const N: usize>(
             message: "sensitivities of constrained models are not supported yet",
         }));
     }
+    // The parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a
+    // stack that could not be mapped would end the process.
+    let stack_bytes = crate::model::general::parameter_stack_bytes::<N>();
+    if stack_bytes > crate::MAX_KERNEL_STACK && !integ.model.parameter_names().is_empty() {
+        return Err(RunFailure::new(Error::SensitivitiesTooLarge {
+            dof: N,
+            stack_bytes,
+            max: crate::MAX_KERNEL_STACK,
+        }));
+    }
     Ok(())
 }
 
 /// The stepper a run may start on: the last run's, kept by [`Runs`](super::Runs), or none.
 #[doc(hidden)]
-pub type Slot<'s, M, const N: usize> = Option<Stepper<'s, M, N>>;
+pub type Slot<'s, M, const N: usize> = Option<Box<Stepper<'s, M, N>>>;
 
 /// Opens the run's stepper and hands it to `visit`: the one in `slot` restarted
 /// ([`Stepper::restart`]) where the run takes the dense backend whatever its initial
@@ -399,7 +409,9 @@ fn open<'s, M: ForcedLagrangian<N>, const N: usize, R>(
         }
     }
     *slot = None;
-    let stepper = slot.insert(integ.stepper(init, t_final).map_err(RunFailure::new)?);
+    let stepper = slot.insert(Box::new(
+        integ.stepper(init, t_final).map_err(RunFailure::new)?,
+    ));
     visit(stepper)
 }
 

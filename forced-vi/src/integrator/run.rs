@@ -6,6 +6,7 @@ use super::Integrator;
 use super::output::{self, Output};
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
+use crate::stack::{run_stack_bytes, with_stack};
 use crate::trajectory::{
     AdjointGradient, DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord,
     Trajectory,
@@ -27,7 +28,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         t_final: f64,
         output: O,
     ) -> Result<O::Value, RunFailure<N>> {
-        output.drive(self, &mut None, init, t_final)
+        // On a stack deep enough for the run's copies of `[f64; N]` values, whichever
+        // thread runs it (the initial state is copied there, not here).
+        let init = &init;
+        with_stack(run_stack_bytes(N), move || {
+            output.drive(self, &mut None, *init, t_final)
+        })
     }
 
     /// A handle that runs this integrator again and again on one stepper: each
@@ -144,6 +150,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Runs<'_, '_, M, N> {
         t_final: f64,
         output: O,
     ) -> Result<O::Value, RunFailure<N>> {
-        output.drive(self.integ, &mut self.slot, init, t_final)
+        let (integ, slot, init) = (self.integ, &mut self.slot, &init);
+        with_stack(run_stack_bytes(N), move || {
+            output.drive(integ, slot, *init, t_final)
+        })
     }
 }

@@ -175,7 +175,8 @@ impl VelocitySolver {
         if dv.iter().all(|x| x.is_finite()) {
             Ok(())
         } else {
-            Err(Error::NonFiniteModel { step: 0, t: at.0 })
+            let size = dq.iter().chain(dp).fold(0.0f64, |m, x| m.max(x.abs()));
+            Err(crate::stepper::non_finite(size, 0, at.0, "tangent"))
         }
     }
 

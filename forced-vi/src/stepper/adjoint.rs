@@ -113,7 +113,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let at = (t_end, &q_end[..], &v_end[..]);
         let zero = vec![0.0; N];
         let mut y = vec![0.0; N];
-        self.backend.velocity_tangent(at, (&zero, gv), &mut y)?;
+        let k_end = self.k;
+        self.backend
+            .velocity_tangent(at, (&zero, gv), &mut y)
+            .map_err(|e| match e {
+                Error::Overflow { t, .. } => Error::Overflow {
+                    step: k_end,
+                    t,
+                    quantity: "adjoint",
+                },
+                e => e.at_step(k_end),
+            })?;
         let (mut cq, mut ev) = (vec![0.0; N], vec![0.0; N]);
         self.backend
             .momentum_cotangent(at, &y, (&mut cq, &mut ev))?;
@@ -127,15 +137,21 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let mut c = vec![0.0; dim];
         let mut scratch = [vec![0.0; N], vec![0.0; N], vec![0.0; N], vec![0.0; N]];
         let (mut nf, mut nl) = (vec![0.0; r * N], vec![0.0; r * N]);
-        let step_fail = |f: StepFailure, t0: f64| self_error(f, t0);
-        for rec in tape.data.chunks_exact(tape.width).rev() {
+        let step_fail = |f: StepFailure, k: usize, t0: f64| self_error(f, k, t0);
+        for (i, rec) in tape.data.chunks_exact(tape.width).enumerate().rev() {
+            // The step of the run this record is (counted from 1; substeps count as
+            // steps), and the size of the
+            // adjoint before it: an adjoint that leaves `f64`'s range from a huge one
+            // overflowed, one that turns NaN from a moderate one met the model's NaN.
+            let k = i + 1;
+            let size = aq.iter().chain(&ap).fold(0.0f64, |m, x| m.max(x.abs()));
             let (h, t0) = (rec[0], rec[1]);
             let (q0, rest) = rec[2..].split_at(N);
             let (p0, z) = rest.split_at(N);
             self.backend.restore(h, t0, (q0, p0), z);
             self.backend
                 .linearize_transposed()
-                .map_err(|f| step_fail(f, t0))?;
+                .map_err(|f| step_fail(f, k, t0))?;
             // c = S_Zᵀ Kᵀ (0, …, 0, a_p) + a_q at the last control point.
             mu.fill(0.0);
             mu[(s - 1) * N..].copy_from_slice(&ap);
@@ -181,7 +197,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 }
             }
             if !(aq.iter().chain(&ap).all(|x| x.is_finite())) {
-                return Err(Error::NonFiniteModel { step: 0, t: t0 });
+                return Err(super::checks::non_finite(size, k, t0, "adjoint"));
             }
         }
         // The start: p_0 = L_v(q_0, v_0; θ).
@@ -198,17 +214,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             *g += contraction(self.model, at, (&zero, &ap), &theta, k);
         }
         if !(grad.iter().chain(&grad_theta).all(|x| x.is_finite())) {
-            return Err(Error::NonFiniteModel { step: 0, t: 0.0 });
+            let size = aq.iter().chain(&ap).fold(0.0f64, |m, x| m.max(x.abs()));
+            return Err(super::checks::non_finite(size, 0, 0.0, "adjoint"));
         }
         Ok((grad, DVector::from_vec(grad_theta)))
     }
 }
 
 /// The error of a step that the backward pass could not linearise again.
-fn self_error(f: StepFailure, t: f64) -> Error {
+fn self_error(f: StepFailure, step: usize, t: f64) -> Error {
     match f {
         StepFailure::Memory { records } => Error::TooManyRecords { records },
-        _ => Error::NonFiniteModel { step: 0, t },
+        _ => Error::NonFiniteModel { step, t },
     }
 }
 

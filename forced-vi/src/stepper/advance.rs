@@ -264,7 +264,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                             tape.restore();
                         }
                     }
-                    if matches!(f, StepFailure::OutsidePattern | StepFailure::Memory { .. }) {
+                    if f.is_fatal() {
                         return Err(self.failure_error(f, t0));
                     }
                     last_failure = f;
@@ -324,6 +324,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             StepFailure::OutsidePattern => Error::outside_pattern(),
             StepFailure::Memory { records } => Error::TooManyRecords { records },
             StepFailure::Newton(f) => newton_error(f, self.state.size(), step, t0),
+            StepFailure::TangentOverflow => Error::Overflow {
+                step,
+                t: t0,
+                quantity: "tangent",
+            },
         }
     }
 }

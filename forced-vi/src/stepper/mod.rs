@@ -39,6 +39,7 @@ mod adaptive;
 mod adjoint;
 mod advance;
 mod checks;
+pub(crate) use checks::non_finite;
 mod predict;
 mod start;
 mod state;
@@ -432,14 +433,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
     type Item = Result<StepRecord<N>, Error>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        let out = match self.next_step()? {
-            Ok(Some(done)) => with_stack(self.stack, || self.emit(done)),
-            Ok(None) => with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))),
-            Err(e) => Err(e),
-        };
-        if out.is_err() {
-            self.done = true;
-        }
-        Some(out)
+        // A step and its record hold `[f64; N]` values: the stack a run takes, for a
+        // stepper driven from any thread.
+        let need = self.stack.max(crate::stack::run_stack_bytes(N));
+        with_stack(need, || {
+            let out = match self.next_step()? {
+                Ok(Some(done)) => with_stack(self.stack, || self.emit(done)),
+                Ok(None) => with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))),
+                Err(e) => Err(e),
+            };
+            if out.is_err() {
+                self.done = true;
+            }
+            Some(out)
+        })
     }
 }

@@ -108,7 +108,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// Carries the tangent through the step just solved (size `state.h_prev`), whose
-    /// solution the backend still holds. Nothing changes on failure.
+    /// solution the backend still holds. Nothing changes on failure, but for columns that
+    /// overflowed ([`StepFailure::TangentOverflow`]), which end the run.
     pub(super) fn tangent_step(&mut self) -> Result<(), StepFailure> {
         let Some(tg) = self.tangent.as_mut() else {
             return Ok(());
@@ -133,7 +134,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
         }
         propagate(backend, tg, h, N);
-        Ok(())
+        // Columns that left the range of `f64` (the flow stretches perturbations beyond it)
+        // end the run here, at the step where they did: nothing after it could be finite.
+        if tg.m.iter().all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            Err(StepFailure::TangentOverflow)
+        }
     }
 
     /// The tangent at the current state in `(q, v)`, from `E dv = dp − C dq` at the current
@@ -156,7 +163,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 check_parameter_gradient(&g, self.t)?;
                 dp.iter_mut().zip(g.lv.iter()).for_each(|(x, y)| *x -= y);
             }
-            self.backend.velocity_tangent(at, (dq, dp), &mut dv)?;
+            self.backend
+                .velocity_tangent(at, (dq, dp), &mut dv)
+                .map_err(|e| e.at_step(self.k))?;
             dp.copy_from_slice(&dv);
         }
         let wrt_parameters = out.columns(2 * N, cols - 2 * N).into_owned();
