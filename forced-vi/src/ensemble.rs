@@ -101,9 +101,8 @@ where
         // Each value is boxed on the run's own stack (see `run_stack_bytes`): on its way
         // through the workers' collection it is a pointer, not `[f64; N]` arrays copied on
         // a worker's stack (a final state of 16384 coordinates overflowed one).
-        let need = crate::stack::run_stack_bytes(N);
         let one = |runs: &mut super::Runs<'_, '_, M, N>, init: &InitialState<N>| {
-            crate::stack::with_stack(need, || {
+            crate::stack::with_run_stack::<N, _>(|| {
                 Box::new(runs.solve(*init, t_final, output.clone()))
             })
         };

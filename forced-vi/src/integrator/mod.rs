@@ -302,9 +302,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
         let init = &init;
-        crate::stack::with_stack(crate::stack::run_stack_bytes(N), move || {
-            self.stepper_here(*init, t_final)
-        })
+        crate::stack::with_run_stack::<N, _>(move || self.stepper_here(*init, t_final))
     }
 
     /// [`Self::stepper`] on the current stack.

@@ -6,7 +6,7 @@ use super::Integrator;
 use super::output::{self, Output};
 use crate::initial::InitialState;
 use crate::model::ForcedLagrangian;
-use crate::stack::{run_stack_bytes, with_stack};
+use crate::stack::with_run_stack;
 use crate::trajectory::{
     AdjointGradient, DenseState, FinalState, RunFailure, RunStats, Sensitivities, StepRecord,
     Trajectory,
@@ -31,9 +31,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Integrator<'_, M, N> {
         // On a stack deep enough for the run's copies of `[f64; N]` values, whichever
         // thread runs it (the initial state is copied there, not here).
         let init = &init;
-        with_stack(run_stack_bytes(N), move || {
-            output.drive(self, &mut None, *init, t_final)
-        })
+        with_run_stack::<N, _>(move || output.drive(self, &mut None, *init, t_final))
     }
 
     /// A handle that runs this integrator again and again on one stepper: each
@@ -151,8 +149,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Runs<'_, '_, M, N> {
         output: O,
     ) -> Result<O::Value, RunFailure<N>> {
         let (integ, slot, init) = (self.integ, &mut self.slot, &init);
-        with_stack(run_stack_bytes(N), move || {
-            output.drive(integ, slot, *init, t_final)
-        })
+        with_run_stack::<N, _>(move || output.drive(integ, slot, *init, t_final))
     }
 }

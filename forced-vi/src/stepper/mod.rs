@@ -435,8 +435,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Iterator for Stepper<'_, M, N> {
     fn next(&mut self) -> Option<Self::Item> {
         // A step and its record hold `[f64; N]` values: the stack a run takes, for a
         // stepper driven from any thread.
-        let need = self.stack.max(crate::stack::run_stack_bytes(N));
-        with_stack(need, || {
+        crate::stack::with_run_stack::<N, _>(|| {
             let out = match self.next_step()? {
                 Ok(Some(done)) => with_stack(self.stack, || self.emit(done)),
                 Ok(None) => with_stack(self.stack, || Ok(self.record(0, 0.0, 1, true))),
