@@ -484,3 +484,37 @@ fn driven_kernels_match_the_general_path_at_the_time() {
         },
     );
 }
+
+/// An unsigned integer expression that wraps in the model's own code: `1usize - 3` is
+/// 2⁶⁴ − 2 there, and the symbolic kernels, which evaluated integers as `i64`, took −2 (a
+/// relative error of 1 in `L_q`, `STRUCTURE.linear` claimed for the wrong model, and a run
+/// that ended `Ok` on the −2 model with an energy of 1.6e20). Such an expression is left to
+/// the general kernels, which evaluate the model's code.
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x - (1usize - 3) as f64 * 1e-20 * x * x,
+    force(x = -(c - (2usize - 1) as f64) * x_dot),
+)]
+struct WrappingInteger {
+    c: f64,
+}
+
+#[test]
+fn wrapping_unsigned_integers_are_the_model_codes() {
+    let m = WrappingInteger { c: 1.1 };
+    // The model's own value: the wrapped coefficient, 1.8e19 × 1e-20.
+    let l = m.lagrangian::<f64>(&[1.0], &[0.0]);
+    let wrapped = -0.5 - (1usize.wrapping_sub(3)) as f64 * 1e-20;
+    assert!((l - wrapped).abs() < 1e-12, "{l} {wrapped}");
+    let (q, v) = (SVector::from([0.7]), SVector::from([-0.3]));
+    let spec = m.node_jacobian(&q, &v);
+    let gen = general::node_jacobian(&m, &q, &v);
+    assert_blocks_close("WrappingInteger vs general", &spec, &gen, 1e-12);
+    let grad = m.node_gradient(&q, &v);
+    assert!(
+        close(grad.fq[0], gen.grad.fq[0], 1e-13),
+        "{} {}",
+        grad.fq[0],
+        gen.grad.fq[0]
+    );
+}

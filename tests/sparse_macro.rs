@@ -347,3 +347,79 @@ fn chain_pattern_is_tridiagonal() {
     assert_eq!(pattern.nnz(), 3 * N - 2);
     assert!(pattern.entries().all(|(r, c)| r.abs_diff(c) <= 1));
 }
+
+/// Oscillators of stiffness `1 + i`, with a loop variable named like a field (`i`).
+#[forced_lagrangian(
+    coordinates(q: [f64; 8]),
+    lagrangian = (0..8).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..8).map(|i| 0.5 * (1.0 + i as f64) * q[i] * q[i]).sum(),
+)]
+struct FieldNamedLikeLoop {
+    i: f64,
+}
+
+/// A scalar coordinate `x` beside an array whose loop variable is also `x`, with a damping
+/// force whose index is named like the field `c`.
+#[forced_lagrangian(
+    coordinates(x, q: [f64; 6]),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x
+        + (0..6).map(|x| 0.5 * q_dot[x] * q_dot[x] - 0.5 * (1.0 + x as f64) * q[x] * q[x]).sum(),
+    force(x = -c * x_dot, q[c] = -0.1 * q_dot[c]),
+)]
+struct CoordinateNamedLikeLoop {
+    c: f64,
+}
+
+/// `CoordinateNamedLikeLoop` with its names apart (split into per-term kernels).
+#[forced_lagrangian(
+    coordinates(x, q: [f64; 6]),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x * x
+        + (0..6).map(|j| 0.5 * q_dot[j] * q_dot[j] - 0.5 * (1.0 + j as f64) * q[j] * q[j]).sum(),
+    force(x = -c * x_dot, q[j] = -0.1 * q_dot[j]),
+)]
+struct NamesApart {
+    c: f64,
+}
+
+/// A loop variable named like a field or a coordinate: the dense code reads the variable,
+/// and the per-term kernels read the field (bound over their argument) or the coordinate (a
+/// bare scalar name); such a model ran `Ok` with every oscillator at stiffness `1 + i` for
+/// the field `i = 100` (all ended at cos √101). Now it keeps its dense kernels, and the
+/// results are those of the model with its names apart.
+#[test]
+fn loop_variables_named_like_fields_or_coordinates_keep_their_meaning() {
+    let m = FieldNamedLikeLoop { i: 100.0 };
+    assert!(m.sparse_node().is_none());
+    let integ = Integrator::new(&m, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
+    let end = integ
+        .final_state(InitialState::from_velocity([1.0; 8], [0.0; 8]), 1.0)
+        .unwrap();
+    for (j, q) in end.q.iter().enumerate() {
+        let exact = (1.0 + j as f64).sqrt().cos();
+        assert!((q - exact).abs() < 1e-9, "q[{j}] = {q}, exact {exact}");
+    }
+    let (clash, apart) = (CoordinateNamedLikeLoop { c: 0.3 }, NamesApart { c: 0.3 });
+    assert!(clash.sparse_node().is_none());
+    assert!(apart.sparse_node().is_some());
+    let init = InitialState::from_velocity([0.5, 1.0, -1.0, 0.5, 0.2, -0.3, 0.8], [0.0; 7]);
+    let a = Integrator::new(&clash, Scheme::lobatto(4).unwrap(), 0.01)
+        .unwrap()
+        .final_state(init, 1.0)
+        .unwrap();
+    let b = Integrator::new(&apart, Scheme::lobatto(4).unwrap(), 0.01)
+        .unwrap()
+        .final_state(init, 1.0)
+        .unwrap();
+    for k in 0..7 {
+        assert!(
+            (a.q[k] - b.q[k]).abs() < 1e-12,
+            "{k}: {} {}",
+            a.q[k],
+            b.q[k]
+        );
+    }
+    // The scalar coordinate, damped by the field `c`: x = ½ e^{−0.15 t}(cos ωt + …).
+    let w = (1.0f64 - 0.15 * 0.15).sqrt();
+    let x = 0.5 * (-0.15f64).exp() * (w.cos() + 0.15 / w * w.sin());
+    assert!((a.q[0] - x).abs() < 1e-9, "{} {x}", a.q[0]);
+}

@@ -184,30 +184,40 @@ impl Extractor<'_> {
 
     /// A compile-time integer: literals, the index variable, `+ - *`.
     fn int(&self, e: &Expr) -> Option<i64> {
+        self.int_typed(e).map(|(v, _)| v)
+    }
+
+    /// An integer expression's value, and whether it involves a `usize` (a suffixed literal,
+    /// or a force entry's index). A `usize` expression whose value, or a part's, would be
+    /// negative wraps in the model's own code (`1usize - 3` is 2⁶⁴ − 2 there): it is left
+    /// to the general kernels, which evaluate that code, rather than taken as −2.
+    fn int_typed(&self, e: &Expr) -> Option<(i64, bool)> {
         match e {
             Expr::Lit(l) => match &l.lit {
                 Lit::Int(i)
                     if i.suffix().is_empty() || i.suffix() == "usize" || i.suffix() == "i32" =>
                 {
-                    i.base10_parse().ok()
+                    Some((i.base10_parse().ok()?, i.suffix() == "usize"))
                 }
                 _ => None,
             },
             Expr::Path(p) => {
                 let (name, value) = self.index.as_ref()?;
-                p.path.is_ident(name).then_some(*value)
+                p.path.is_ident(name).then_some((*value, true))
             }
-            Expr::Paren(p) => self.int(&p.expr),
+            Expr::Paren(p) => self.int_typed(&p.expr),
             Expr::Binary(b) => {
-                let (l, r) = (self.int(&b.left)?, self.int(&b.right)?);
-                match b.op {
+                let ((l, lu), (r, ru)) = (self.int_typed(&b.left)?, self.int_typed(&b.right)?);
+                let v = match b.op {
                     BinOp::Add(_) => l.checked_add(r),
                     BinOp::Sub(_) => l.checked_sub(r),
                     BinOp::Mul(_) => l.checked_mul(r),
                     BinOp::Div(_) => l.checked_div(r),
                     BinOp::Rem(_) => l.checked_rem(r),
                     _ => None,
-                }
+                }?;
+                let unsigned = lu || ru;
+                (!unsigned || v >= 0).then_some((v, unsigned))
             }
             _ => None,
         }

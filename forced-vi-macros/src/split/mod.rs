@@ -235,11 +235,31 @@ impl Analysis<'_> {
         Some((self.iterator(var, &map.receiver, body, loops)?, body))
     }
 
+    /// Whether a loop variable's name is its own: not a parameter's, a coordinate's or its
+    /// velocity's, a const parameter's, `t`, or one of the generated code's. The dense code
+    /// reads such a variable where it is in scope; a term's kernel takes it as an argument
+    /// and then binds the parameters and the slots, which would shadow it (a loop `|i|` in a
+    /// model with a field `i` ran on the field's value, and `Ok` with wrong numbers), and the
+    /// rewrite reads a bare scalar coordinate's name as that coordinate. Such a model keeps
+    /// its dense kernels.
+    fn free_name(&self, var: &Ident) -> bool {
+        let name = var.to_string();
+        let env = self.env;
+        !(name == TIME
+            || name.starts_with("__fvi")
+            || env.params.iter().any(|p| *p == name)
+            || env.const_params.iter().any(|p| *p == name)
+            || env
+                .groups
+                .iter()
+                .any(|g| g.name == name || g.velocity == name))
+    }
+
     /// A loop over `iter`: integers that depend on nothing but constants, and of type
     /// `usize` in the dense code too (the per-term kernels take the loop variable as a
     /// `usize`).
     fn iterator(&self, var: &Ident, iter: &Expr, body: &Expr, loops: &[Loop]) -> Option<Loop> {
-        if loops.iter().any(|l| l.var == *var) {
+        if loops.iter().any(|l| l.var == *var) || !self.free_name(var) {
             return None;
         }
         if mentions_coordinate(self.env, iter) {
@@ -392,6 +412,7 @@ impl Analysis<'_> {
             _ => return None,
         };
         let (loops, row) = match (&f.index, f.element) {
+            (Some(i), _) if !self.free_name(i) => return None,
             (Some(i), _) => {
                 let range = len.literal().and_then(|n| {
                     Some(IntRange {
