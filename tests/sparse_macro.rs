@@ -7,6 +7,7 @@
 use forced_vi::model::general;
 use forced_vi::prelude::*;
 use forced_vi::sparse::{NodeBlocks, NodePattern, NodeSink};
+use forced_vi::LinearPath;
 use forced_vi_models::models::SpringChain;
 use nalgebra::{SMatrix, SVector};
 use proptest::prelude::*;
@@ -348,11 +349,13 @@ fn chain_pattern_is_tridiagonal() {
     assert!(pattern.entries().all(|(r, c)| r.abs_diff(c) <= 1));
 }
 
-/// Oscillators of stiffness `1 + i`, with a loop variable named like a field (`i`).
+/// Damped oscillators of stiffness `1 + i`, with a loop variable and a force index named
+/// like a field (`i`).
 #[forced_lagrangian(
     coordinates(q: [f64; 8]),
     lagrangian = (0..8).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
         - (0..8).map(|i| 0.5 * (1.0 + i as f64) * q[i] * q[i]).sum(),
+    force(q[i] = -0.1 * q_dot[i]),
 )]
 struct FieldNamedLikeLoop {
     i: f64,
@@ -384,19 +387,28 @@ struct NamesApart {
 /// A loop variable named like a field or a coordinate: the dense code reads the variable,
 /// and the per-term kernels read the field (bound over their argument) or the coordinate (a
 /// bare scalar name); such a model ran `Ok` with every oscillator at stiffness `1 + i` for
-/// the field `i = 100` (all ended at cos √101). Now it keeps its dense kernels, and the
-/// results are those of the model with its names apart.
+/// the field `i = 100` (all ended at cos √101). Now a term's kernel leaves a parameter of the
+/// loop variable's name unbound, and a loop variable named like a coordinate keeps the
+/// dense kernels; the results are those of the model with its names apart.
 #[test]
 fn loop_variables_named_like_fields_or_coordinates_keep_their_meaning() {
     let m = FieldNamedLikeLoop { i: 100.0 };
-    assert!(m.sparse_node().is_none());
-    let integ = Integrator::new(&m, Scheme::lobatto(4).unwrap(), 0.01).unwrap();
-    let end = integ
-        .final_state(InitialState::from_velocity([1.0; 8], [0.0; 8]), 1.0)
-        .unwrap();
-    for (j, q) in end.q.iter().enumerate() {
-        let exact = (1.0 + j as f64).sqrt().cos();
-        assert!((q - exact).abs() < 1e-9, "q[{j}] = {q}, exact {exact}");
+    assert!(m.sparse_node().is_some());
+    let init = InitialState::from_velocity([1.0; 8], [0.0; 8]);
+    for path in [LinearPath::Sparse, LinearPath::Dense] {
+        let end = Integrator::new(&m, Scheme::lobatto(4).unwrap(), 0.01)
+            .unwrap()
+            .linear_path(path)
+            .final_state(init, 1.0)
+            .unwrap();
+        for (j, q) in end.q.iter().enumerate() {
+            let w = (1.0 + j as f64 - 0.0025).sqrt();
+            let exact = (-0.05f64).exp() * (w.cos() + 0.05 / w * w.sin());
+            assert!(
+                (q - exact).abs() < 1e-9,
+                "{path:?} q[{j}] = {q}, exact {exact}"
+            );
+        }
     }
     let (clash, apart) = (CoordinateNamedLikeLoop { c: 0.3 }, NamesApart { c: 0.3 });
     assert!(clash.sparse_node().is_none());

@@ -69,7 +69,16 @@ pub fn helpers(c: &Checked, s: &Split) -> TokenStream {
 fn term_fn(c: &Checked, l: &Local, name: &Ident) -> TokenStream {
     let fvi = fvi();
     let k = l.slots.len();
-    let params = &c.env.params;
+    // A loop variable named like a parameter is the variable in the term, as in the dense
+    // code (where the closure's or the loop's binding shadows the field): that parameter is
+    // not bound over it (a loop `|i|` in a model with a field `i` ran on the field's value,
+    // and ended `Ok` with every oscillator at the field's stiffness).
+    let params: Vec<&Ident> = c
+        .env
+        .params
+        .iter()
+        .filter(|p| !l.loops.iter().any(|(v, _)| v == *p))
+        .collect();
     let var = l.loops.iter().map(|(v, _)| quote!(#v: usize,));
     let binds = l.slots.iter().enumerate().map(|(j, s)| {
         let id = &s.ident;

@@ -288,6 +288,22 @@ impl Lowerer<'_> {
     pub(super) fn cast(&mut self, c: &syn::ExprCast) -> Lowered {
         let inner = self.expr(&c.expr);
         let ty = &c.ty;
+        if inner.kind == Kind::Dual && !self.env.params_dual {
+            // A coordinate, a velocity or the time is a dual number in the kernels: rustc
+            // would reject the cast at the whole attribute, naming the kernels' `__D`.
+            self.cx.error_spanned_by(
+                c,
+                format!(
+                    "`{}` casts a quantity that is differentiated (a coordinate, a velocity or the time): it is already a real number, so leave out `as {}`",
+                    compact(&quote!(#c).to_string()),
+                    compact(&quote!(#ty).to_string())
+                ),
+            );
+            // Read on as the real number the cast asked for: one error per cast.
+            let mut out = inner;
+            out.kind = Kind::Real;
+            return out;
+        }
         let is_float = matches!(&*c.ty, syn::Type::Path(p) if p.path.is_ident("f64"));
         let mut out = inner.clone();
         out.kind = if is_float { Kind::Real } else { Kind::Int };

@@ -197,7 +197,10 @@ impl Lowerer<'_> {
             _ => return self.unsupported(u, "dereferencing"),
         }
         let t = inner.operand();
-        out.tokens = quote!(#op #t);
+        // Spanned at the user's tokens: rustc's own error (`-` on a `usize` index) then
+        // points there, not at the whole attribute.
+        let span = syn::spanned::Spanned::span(u);
+        out.tokens = quote::quote_spanned!(span=> #op #t);
         out.atomic = false;
         out
     }

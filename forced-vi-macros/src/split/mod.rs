@@ -235,19 +235,17 @@ impl Analysis<'_> {
         Some((self.iterator(var, &map.receiver, body, loops)?, body))
     }
 
-    /// Whether a loop variable's name is its own: not a parameter's, a coordinate's or its
-    /// velocity's, a const parameter's, `t`, or one of the generated code's. The dense code
-    /// reads such a variable where it is in scope; a term's kernel takes it as an argument
-    /// and then binds the parameters and the slots, which would shadow it (a loop `|i|` in a
-    /// model with a field `i` ran on the field's value, and `Ok` with wrong numbers), and the
-    /// rewrite reads a bare scalar coordinate's name as that coordinate. Such a model keeps
-    /// its dense kernels.
+    /// Whether a loop variable's name is free for a term's kernel: not a coordinate's or its
+    /// velocity's (the rewrite reads a bare scalar coordinate's name as that coordinate: a
+    /// loop `|x|` beside a coordinate `x` ran on the coordinate), not a const parameter's or
+    /// `t` (which the kernel binds), nor one of the generated code's. A parameter's name is
+    /// free: the kernel leaves that parameter unbound (see `sparse::term_fn`). Otherwise
+    /// the model keeps its dense kernels.
     fn free_name(&self, var: &Ident) -> bool {
         let name = var.to_string();
         let env = self.env;
         !(name == TIME
             || name.starts_with("__fvi")
-            || env.params.iter().any(|p| *p == name)
             || env.const_params.iter().any(|p| *p == name)
             || env
                 .groups
