@@ -171,3 +171,21 @@ fn trust_derivatives_that_overflow_are_reported_where_they_do() {
         other => panic!("{other}"),
     }
 }
+
+/// An index of a constraint that is out of range at every evaluation (`q[N]` in a model of
+/// `N` coordinates): refused by `Integrator::new` with the index named, as one in the
+/// Lagrangian is, where every run ended in `NonFiniteModel` at step 0.
+#[test]
+fn trust_a_constraint_index_out_of_range_is_named() {
+    #[forced_lagrangian(
+        coordinates(q: [f64; N]),
+        lagrangian = (0..N).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum(),
+        constraints(q[0] - q[N] + q[1]),
+    )]
+    struct PastTheEnd<const N: usize> {}
+    let err = Integrator::new(&PastTheEnd::<3> {}, Scheme::lobatto(3).unwrap(), 0.1).unwrap_err();
+    match err {
+        Error::InvalidModel { message } => assert!(message.contains("out of range"), "{message}"),
+        other => panic!("{other}"),
+    }
+}

@@ -46,7 +46,7 @@ pub struct Checked<'a> {
     pub linear: bool,
     /// The Lagrangian or the force names the time `t`.
     pub uses_time: bool,
-    /// Some index of the Lagrangian or the force is checked at run time: generate
+    /// Some index of the Lagrangian, the force or a constraint is checked at run time: generate
     /// `check_model`.
     pub checked_index: bool,
     /// The holonomic constraints `g_k(t, q)`, lowered (DESIGN §11).
@@ -130,7 +130,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
         check_lagrangian_uses_velocity(cx, &env, lagrangian, &lowered);
     }
     let force_fns = model.force.as_ref().map(|f| check_force(cx, &env, f));
-    let constraints = check_constraints(cx, &env, model, &n);
+    let (constraints, constraints_checked) = check_constraints(cx, &env, model, &n);
     let n = n?;
     if cx.has_errors() {
         return None;
@@ -153,6 +153,7 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
             .is_some_and(|f| f.fns.iter().any(|func| func.lowered.names.contains(TIME)));
     let uses_time = uses_time || constraints.iter().any(|c| c.names.contains(TIME));
     let checked_index = l_checked
+        || constraints_checked
         || force
             .as_ref()
             .is_some_and(|f| f.fns.iter().any(|func| func.checked));
@@ -176,9 +177,9 @@ pub fn check_as<'a>(cx: &Ctxt, model: &'a Model, params_dual: bool) -> Option<Ch
 
 /// The `constraints(...)` argument: each expression lowered, reading no velocity (only
 /// holonomic constraints are supported), fewer constraints than coordinates.
-fn check_constraints(cx: &Ctxt, env: &Env, model: &Model, n: &Option<Len>) -> Vec<Lowered> {
+fn check_constraints(cx: &Ctxt, env: &Env, model: &Model, n: &Option<Len>) -> (Vec<Lowered>, bool) {
     let Some((key, exprs)) = model.constraints.as_ref() else {
-        return Vec::new();
+        return (Vec::new(), false);
     };
     if let Some(n) = n.as_ref().and_then(|n| n.literal()) {
         if exprs.len() >= n {
@@ -192,10 +193,11 @@ fn check_constraints(cx: &Ctxt, env: &Env, model: &Model, n: &Option<Len>) -> Ve
         }
     }
     let velocities: Vec<String> = env.groups.iter().map(|g| g.velocity.to_string()).collect();
-    let mut out = Vec::new();
+    let (mut out, mut checked) = (Vec::new(), false);
     for (k, e) in exprs.iter().enumerate() {
         let mut lw = Lowerer::new(cx, env, format!("constraint {}", k + 1));
         let l = lw.expr(e);
+        checked |= lw.checked_index.get();
         if let Some(v) = velocities.iter().find(|v| l.names.contains(*v)) {
             // Point at the velocity itself where it is written.
             let at = velocity_token(e, v);
@@ -210,7 +212,7 @@ fn check_constraints(cx: &Ctxt, env: &Env, model: &Model, n: &Option<Len>) -> Ve
         }
         out.push(l);
     }
-    out
+    (out, checked)
 }
 
 /// The first token of `e` named `name`.

@@ -476,6 +476,12 @@ impl<'c, 'm> Gen<'c, 'm> {
         let force = self.c.force.as_ref().map(|_| {
             quote!(let _ = <Self as #fvi::ForcedLagrangian<#n>>::force::<f64>(self, &__fvi_z, &__fvi_z);)
         });
+        let constraints = (!self.c.constraints.is_empty()).then(|| {
+            quote! {
+                let mut __fvi_g = ::std::vec![0.0f64; <Self as #fvi::ForcedLagrangian<#n>>::constraint_count(self)];
+                <Self as #fvi::ForcedLagrangian<#n>>::constraints::<f64>(self, 0.0, &__fvi_z, &mut __fvi_g);
+            }
+        });
         quote! {
             fn check_model(&self) -> ::core::result::Result<(), ::std::string::String> {
                 // Indices that the macro could not prove in range are checked accesses;
@@ -485,6 +491,7 @@ impl<'c, 'm> Gen<'c, 'm> {
                 let __fvi_z = [0.0f64; #n];
                 let _ = <Self as #fvi::ForcedLagrangian<#n>>::lagrangian::<f64>(self, &__fvi_z, &__fvi_z);
                 #force
+                #constraints
                 match #fvi::take_index_fault() {
                     ::core::option::Option::Some(__fvi_what) => ::core::result::Result::Err(::std::format!(
                         "index `{}` is out of range: the model has {} coordinates",
