@@ -299,6 +299,9 @@ struct Proportionality {
     fitted: usize,
     slope: Option<f64>,
     worst_ratio: f64,
+    /// The smallest final error in q over its tolerance among the fitted points (NaN
+    /// without any).
+    least_ratio: f64,
     steps: (usize, usize),
     /// The scene's amplification ([`Scene::amplification`]), if it could be measured.
     amplification: Option<f64>,
@@ -343,6 +346,10 @@ fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec
                     .iter()
                     .map(|r| r.errors()[0] / r.h_or_tol)
                     .fold(0.0, f64::max),
+                least_ratio: pts
+                    .iter()
+                    .map(|&(tol, err)| err / tol)
+                    .fold(f64::NAN, f64::min),
                 steps: (rows[rows.len() - 1].steps, rows[0].steps),
                 amplification: amplification.flatten(),
             });
@@ -407,6 +414,77 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
             }),
         ],
     ));
+    md.push_str(&amplified_calibration(&lines));
+    md
+}
+
+/// The amplification at and above which a scene counts as amplifying errors strongly (the
+/// chaotic scenes), for the calibration sentence under the proportionality table.
+const STRONG_AMPLIFICATION: f64 = 100.0;
+
+/// Issue 23's target for the chaotic scenes, measured: every fitted run's err/(tol·A)
+/// within 0.1–10, per scheme, on each scene whose amplification is at least
+/// [`STRONG_AMPLIFICATION`].
+fn amplified_calibration(lines: &[Proportionality]) -> String {
+    let mut md = String::new();
+    let mut scenes: Vec<&str> = lines
+        .iter()
+        .filter(|p| p.amplification.is_some_and(|a| a >= STRONG_AMPLIFICATION))
+        .map(|p| p.scene)
+        .collect();
+    scenes.dedup();
+    for scene in scenes {
+        let rows: Vec<&Proportionality> = lines.iter().filter(|p| p.scene == scene).collect();
+        let Some(a) = rows.iter().find_map(|p| p.amplification) else {
+            continue;
+        };
+        let within = |p: &&&Proportionality| p.least_ratio / a >= 0.1 && p.worst_ratio / a <= 10.0;
+        let met: Vec<String> = rows
+            .iter()
+            .filter(within)
+            .map(|p| format!("`{}`", p.method))
+            .collect();
+        let missed: Vec<String> = rows
+            .iter()
+            .filter(|p| !within(p))
+            .map(|p| {
+                let r = |x: f64| {
+                    if x >= 0.01 {
+                        format!("{x:.2}")
+                    } else {
+                        format!("{x:.0e}")
+                    }
+                };
+                format!(
+                    "`{}` {}–{}",
+                    p.method,
+                    r(p.least_ratio / a),
+                    r(p.worst_ratio / a)
+                )
+            })
+            .collect();
+        md.push_str(&format!(
+            "\nOn `{scene}` (A = {a:.0}), every fitted run's err/(tol·A) is within 0.1–10 (issue \
+             23's target) for {} of {} schemes{}{}. A is the growth of a perturbation in its worst \
+             direction (the ∞-norm of the map's q rows, averaged over t); below 0.1, a run's \
+             local errors grew by less than a tenth of that.\n",
+            met.len(),
+            rows.len(),
+            if met.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", met.join(", "))
+            },
+            if missed.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; not for {} (least–worst ratio over the fitted runs)",
+                    missed.join(", ")
+                )
+            },
+        ));
+    }
     md
 }
 
