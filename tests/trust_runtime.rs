@@ -280,6 +280,115 @@ fn trust_outputs_closer_than_min_step_keep_the_tolerance() {
     }
 }
 
+/// The exact velocity of the damped oscillator from `(1, 0)`.
+fn damped_exact_velocity(c: f64, t: f64) -> f64 {
+    let w = (1.0 - c * c / 4.0).sqrt();
+    -(-c * t / 2.0).exp() * (w * t).sin() / w
+}
+
+/// Output times a few ulps apart, anywhere in the list (a pair the clock barely tells
+/// apart, from a grid built by sums): every sample keeps the tolerance. Before, an output
+/// closer than the run's smallest step after another was not landed on and stayed the
+/// run's next output, so the step after it passed over the outputs behind it, which were
+/// interpolated over that whole step (`[2, 2 + 1e-14, 3]`, lobatto7 at tol 1e-10: 1.6e-2
+/// off at t = 3).
+#[test]
+fn trust_output_times_ulps_apart_keep_the_tolerance() {
+    let c = 0.1;
+    let model = Damped { c };
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    let sets: [&[f64]; 4] = [
+        &[2.0, 2.0 + 1e-14, 3.0],
+        &[0.5, 0.5 + 2e-16, 0.5 + 4e-16, 4.0, 7.5],
+        &[1e-15, 3.0, 3.0 + 8e-15, 9.0],
+        &[2.0, 2.0 + 1e-14, 2.0 + 3e-14, 6.0, 6.0 + 1e-14, 9.5],
+    ];
+    for times in sets {
+        for s in [3, 5, 7] {
+            for tol in [1e-6, 1e-10] {
+                let out = Integrator::adaptive(&model, Scheme::lobatto(s).unwrap(), tol, tol)
+                    .unwrap()
+                    .solve(init, 10.0, output::Samples(times))
+                    .unwrap_or_else(|f| panic!("{times:?} lobatto{s} tol {tol:e}: {}", f.error));
+                assert_eq!(out.len(), times.len());
+                for d in &out {
+                    let eq = (d.q[0] - damped_exact(c, d.t)).abs();
+                    let ev = (d.v[0] - damped_exact_velocity(c, d.t)).abs();
+                    assert!(
+                        eq.max(ev) <= 10.0 * tol,
+                        "{times:?} lobatto{s} tol {tol:e}: at t = {} off by {eq:e} in q, {ev:e} in v",
+                        d.t
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// An output time within the smallest step of the run's end is a valid time: the run ends
+/// `Ok`, with the end state there. Before, the step landed on it and the sliver left was
+/// refused (`StepSizeTooSmall` after every sample of a grid built by adding 0.1, which ends
+/// at 9.99999999999998 with `t_final` 10).
+#[test]
+fn trust_an_output_time_at_the_round_off_of_the_end_runs() {
+    let c = 0.1;
+    let model = Damped { c };
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    let mut grid = vec![0.0f64];
+    while grid.len() < 100 {
+        let t = grid[grid.len() - 1] + 0.1;
+        grid.push(t);
+    }
+    assert!(grid[99] < 9.9 + 1e-12 && grid[99] != 9.9, "the sums round");
+    let grid: Vec<f64> = grid.iter().map(|t| t + 0.1).collect();
+    assert!(grid[99] != 10.0 && (grid[99] - 10.0).abs() < 1e-12);
+    let sets = [grid, vec![10.0 - 1e-14], vec![3.0, 10.0 - 2e-15]];
+    for times in &sets {
+        for s in [2, 3, 5] {
+            let tol = 1e-8;
+            let out = Integrator::adaptive(&model, Scheme::lobatto(s).unwrap(), tol, tol)
+                .unwrap()
+                .solve(init, 10.0, output::Samples(times))
+                .unwrap_or_else(|f| panic!("lobatto{s}: {}", f.error));
+            for d in &out {
+                let eq = (d.q[0] - damped_exact(c, d.t)).abs();
+                assert!(eq <= 10.0 * tol, "lobatto{s}: at t = {} off by {eq:e}", d.t);
+            }
+        }
+    }
+}
+
+/// A velocity interpolated within a very short interval (a last step of 1e-9, a sample a few
+/// ulps past a step) keeps its digits: the divided difference of the positions over the
+/// interval is replaced by the end velocities' mean where its round-off exceeds their
+/// difference. Before, `Samples` and `Trajectory::at` inside a last step of 1e-9 gave
+/// velocities 1e-6 off.
+#[test]
+fn trust_velocities_interpolated_over_a_short_interval_keep_their_digits() {
+    let c = 0.1;
+    let model = Damped { c };
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    for s in [2, 3, 5] {
+        let t_final = 1.0 + 1e-9;
+        let integ = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.01).unwrap();
+        let t = 1.0 + 0.5e-9;
+        let sampled = integ
+            .solve(init, t_final, output::Samples(&[1.0, t, t_final]))
+            .unwrap();
+        let traj = integ.solve(init, t_final, output::Records).unwrap();
+        let at = traj.at(t).unwrap().v[0];
+        // Over 1e-9 the velocity moves by about 1e-9: the samples inside the last step lie
+        // that close to the record at t = 1.
+        let start = sampled[0].v[0];
+        for (what, v) in [("sample", sampled[1].v[0]), ("Trajectory::at", at)] {
+            assert!(
+                (v - start).abs() < 1e-8,
+                "lobatto{s} {what}: {v} against {start} at t = 1"
+            );
+        }
+    }
+}
+
 /// Two damped oscillators, `L = ½|v|² − ½(q₀² + 4q₁²)`, `F = −c v`.
 struct DampedPair {
     c: f64,

@@ -256,7 +256,14 @@ impl<const N: usize> Output<N> for Samples<'_> {
                         None => hermite(&rec, &rec, t),
                     });
                 }
-                stepper.set_next_output(times.get(out.len()).copied());
+                // The next output time a step can end on: those within the smallest step
+                // of this one are its state, to round-off, and are served by the next
+                // interpolation, which must not span the times after them (an output
+                // 1e-14 after another hid the next one, which a step of 1 then passed
+                // over: 1.4e-1 off at tol 1e-6).
+                let gap = stepper.smallest_step(rec.t);
+                let next = times[out.len()..].iter().find(|&&t| t - rec.t >= gap);
+                stepper.set_next_output(next.copied());
                 prev = Some(rec);
             }
             Ok(out)

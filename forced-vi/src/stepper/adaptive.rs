@@ -56,8 +56,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let span = self.t_final;
         // Never below the smallest step a run takes (a step that shrank to 0 would be
         // retried without end).
-        let h_min = (16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs()))
-            .max(super::StepOptions::SMALLEST_STEP);
+        let h_min = self.smallest_step(t0);
         let mut iters = 0;
         let mut last_failure = None;
         loop {
@@ -71,7 +70,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             // Closer than the smallest step a run takes, the output is the step's start.
             let planned = h;
             let mut landing = None;
-            if let Some(ts) = self.stop.filter(|&ts| ts - t0 >= h_min && ts - t0 < h) {
+            // Not on an output time within the smallest step of the run's end: the sliver
+            // left after it could not be taken (`StepSizeTooSmall` after every sample of a
+            // grid that ends at `T − 2e-14`); the output is the end state there.
+            let landable = |ts: f64| ts - t0 >= h_min && ts - t0 < h && self.t_final - ts >= h_min;
+            if let Some(ts) = self.stop.filter(|&ts| landable(ts)) {
                 landing = Some(ts);
                 h = ts - t0;
             }
@@ -204,6 +207,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             self.stats.rejected_steps += 1;
             self.state.copy_from(&self.saved);
         }
+    }
+
+    /// The smallest step a run takes from `t0`: never below the round-off of the clock (a
+    /// step that shrank to 0 would be retried without end).
+    pub(crate) fn smallest_step(&self, t0: f64) -> f64 {
+        (16.0 * f64::EPSILON * t0.abs().max(self.t_final.abs()))
+            .max(super::StepOptions::SMALLEST_STEP)
     }
 
     /// Keeps the largest step of the current window of [`PACE_WINDOW`] steps, with `h` the
