@@ -1600,3 +1600,49 @@ fn trust_a_fractional_power_of_zero_runs_within_tolerance() {
         }
     }
 }
+
+/// A pendulum of length `l` on the constraint `(x² + y² − l²) / 2`, with drag.
+#[forced_lagrangian(coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - grav * y,
+    force(x = -0.1 * x_dot, y = -0.1 * y_dot),
+    constraints(0.5 * (x * x + y * y - l * l)))]
+struct ScaledPendulum {
+    grav: f64,
+    l: f64,
+}
+
+/// The check of constrained initial data is a distance from the constraints, in the units of
+/// `q`, whatever the constraints' own units. Before, it compared `|g|` itself with
+/// `1e-10 (1 + |q|)`: a pendulum of length 1e-4 started 0.5 % off its circle (`|g|` = 5e-11)
+/// passed, and its first step snapped onto the circle; and `InitialState::projected` of a
+/// pendulum of length 1e6 (in micrometres, where `g`'s round-off is 1e-4) never reached that
+/// bound and refused the data.
+#[test]
+fn trust_constrained_initial_data_are_checked_in_the_units_of_q() {
+    let th = 0.8f64;
+    for l in [1e-4, 1.0, 1e3, 1e6] {
+        let model = ScaledPendulum { grav: 9.81 * l, l };
+        let on = [l * th.sin(), -l * th.cos()];
+        let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
+        // On the circle: runs.
+        let init = InitialState::from_velocity(on, [0.0, 0.0]);
+        integ
+            .final_state(init, 0.1)
+            .unwrap_or_else(|f| panic!("l = {l:e}: {}", f.error));
+        // 0.5 % off the circle, or moving off it: refused, at every scale.
+        let off = InitialState::from_velocity([on[0] * 1.005, on[1] * 1.005], [0.0, 0.0]);
+        let radial = InitialState::from_velocity(on, [on[0] * 1e-3, on[1] * 1e-3]);
+        for (what, init) in [("position", off), ("velocity", radial)] {
+            match integ.final_state(init, 0.1).map_err(|f| f.error) {
+                Err(Error::InconsistentInitialState { what: w, .. }) => assert_eq!(w, what),
+                other => panic!("l = {l:e}, {what} off: {other:?}"),
+            }
+        }
+        // Projected, the same data runs.
+        let projected = InitialState::projected(&model, [on[0] * 1.005, on[1] * 1.005], [0.0, 0.0])
+            .unwrap_or_else(|e| panic!("l = {l:e}: projected: {e}"));
+        integ
+            .final_state(projected, 0.1)
+            .unwrap_or_else(|f| panic!("l = {l:e}, projected: {}", f.error));
+    }
+}

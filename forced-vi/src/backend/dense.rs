@@ -570,7 +570,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     fn constraint_residuals(
         &mut self,
         (t, q, v): (f64, &[f64], &[f64]),
-    ) -> Result<[f64; 3], Error> {
+    ) -> Result<[f64; 4], Error> {
         if M::CONSTRAINED {
             Ok(crate::initial::constraint_residuals_at(
                 self.prob.model,
@@ -579,7 +579,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
                 v,
             ))
         } else {
-            Ok([0.0; 3])
+            Ok([0.0; 4])
         }
     }
 

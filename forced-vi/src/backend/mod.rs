@@ -221,10 +221,10 @@ pub(crate) trait StepBackend {
     /// A constrained model: the momentum `h Σ_j b_j G(x_j)ᵀ λ_j` of the constraint forces
     /// over the last solved step (DESIGN §11); `None` without constraints.
     fn constraint_impulse(&self) -> Option<&[f64]>;
-    /// A constrained model: `[|g|, |G v + ∂g/∂t|, |G| |v| + |∂g/∂t|]` (max-norms: the
-    /// position and velocity residuals, and the size of the latter's terms) at
-    /// `at = (t, q, v)`; zeros without constraints.
-    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error>;
+    /// A constrained model: `[|g|, |G v + ∂g/∂t|, |G| |v| + |∂g/∂t|, |G|]` (max-norms: the
+    /// position and velocity residuals, the size of the latter's terms, and the scale of
+    /// the constraints' gradients) at `at = (t, q, v)`; zeros without constraints.
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 4], Error>;
     /// A constrained model: the multipliers at the end of the last solved step, as
     /// `h² λ_{s−1}` (the units of those of its earlier control points, which follow the
     /// increments in [`Self::z`]).
@@ -484,7 +484,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     fn end_multipliers(&self) -> &[f64] {
         forward!(self, b => b.end_multipliers())
     }
-    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 4], Error> {
         forward!(self, b => b.constraint_residuals(at))
     }
     fn step_data(&self) -> (f64, f64, &[f64], &[f64]) {

@@ -397,7 +397,7 @@ impl StepBackend for SparseBackend<'_> {
         &self.mu
     }
 
-    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 3], Error> {
+    fn constraint_residuals(&mut self, at: (f64, &[f64], &[f64])) -> Result<[f64; 4], Error> {
         let prob = &mut self.prob;
         match prob.cons.as_mut() {
             Some(c) => {
@@ -407,7 +407,7 @@ impl StepBackend for SparseBackend<'_> {
                 }
                 c.residuals(prob.node.get(), &prob.pattern, at, &self.rate_at)
             }
-            None => Ok([0.0; 3]),
+            None => Ok([0.0; 4]),
         }
     }
 

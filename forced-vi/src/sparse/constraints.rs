@@ -121,7 +121,7 @@ impl StepConstraints {
         node_pattern: &NodePattern,
         (t, q, v): (f64, &[f64], &[f64]),
         rate: &[f64],
-    ) -> Result<[f64; 3], Error> {
+    ) -> Result<[f64; 4], Error> {
         self.eval(node, node_pattern, (0, t, q), &[])
             .map_err(|_| Error::NonFiniteModel { step: 0, t })?;
         let g_max = max_norm(self.g_at(0));
@@ -132,7 +132,7 @@ impl StepConstraints {
             self.gv[k] += jac[i] * v[a];
         }
         let size = max_norm(jac) * max_norm(v) + max_norm(rate);
-        Ok([g_max, max_norm(&self.gv), size])
+        Ok([g_max, max_norm(&self.gv), size, max_norm(jac)])
     }
 }
 
@@ -365,7 +365,10 @@ pub(crate) fn project_initial(
             .map_err(non_finite)?;
         let size = 1.0 + max_norm(q);
         let g = max_norm(cons.g_at(0));
-        done = g <= 0.01 * tol * size;
+        // As a distance from the constraints, in the units of `q` (see
+        // `crate::initial::check_constraints`).
+        let gs = max_norm(&cons.jac[..cons.pattern.nnz()]);
+        done = (if gs > 0.0 { g / gs } else { g }) <= 0.01 * tol * size;
         // Quadratic convergence until round-off stops it (a step that no longer halves `g`).
         if g == 0.0 || (done && g > 0.5 * last) {
             break;
@@ -378,9 +381,11 @@ pub(crate) fn project_initial(
     cons.eval(node, &pattern, (0, 0.0, q), &[])
         .map_err(non_finite)?;
     if !done {
+        let gs = max_norm(&cons.jac[..cons.pattern.nnz()]);
+        let g = max_norm(cons.g_at(0));
         return Err(Error::InconsistentInitialState {
             what: "position",
-            residual: max_norm(cons.g_at(0)),
+            residual: if gs > 0.0 { g / gs } else { g },
             tol: tol * (1.0 + max_norm(q)),
         });
     }

@@ -325,7 +325,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let st = &self.state;
             let at = (self.t, &st.q.sum[..], &st.v[..]);
             rec.constraint_residual = match self.backend.constraint_residuals(at) {
-                Ok([g, gv, _]) => g.max(gv),
+                Ok([g, gv, _, _]) => g.max(gv),
                 Err(_) => f64::NAN,
             };
         }
