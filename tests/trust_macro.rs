@@ -294,3 +294,220 @@ fn trust_kernels_fit_their_stack_bound() {
         .map(|h| h.join());
     assert!(matches!(run, Ok(Ok(x)) if x.is_finite()));
 }
+
+// Integer ranges through casts and divisions (a run-time panic class): an index whose values
+// the analysis cannot bound stays checked (NaN, never a panic), and is no compile error.
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 130]),
+    lagrangian = (0..130).map(|i| 0.5 * q_dot[i] * q_dot[i] - 0.5 * k * q[i] * q[i]).sum()
+        - (0..130).map(|i| 0.01 * q[(i as i8) as usize]).sum(),
+)]
+struct NarrowingCastIndex {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 4]),
+    lagrangian = (0..4).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..4).map(|i| 0.5 * q[(i - 1) / 2] * q[i]).sum(),
+)]
+struct WrappedDivisionIndex {}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 256]),
+    lagrangian = (0..256).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..300).map(|i| 0.5 * k * q[(i as u8) as usize] * q[(i as u8) as usize]).sum(),
+)]
+struct WrappingCastInRange {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 5]),
+    lagrangian = (0..5).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..5).map(|i| (0..i).map(|j| q[i - 1] * q[j]).sum()).sum(),
+)]
+struct EmptyInnerRange {}
+
+#[test]
+fn trust_unprovable_indices_are_checked_not_panics_nor_errors() {
+    let r = std::panic::catch_unwind(|| {
+        NarrowingCastIndex { k: 1.0 }.lagrangian::<f64>(&[0.1; 130], &[0.0; 130])
+    });
+    assert!(
+        r.is_ok_and(|x| x.is_nan()),
+        "i as i8 wraps: a checked index"
+    );
+    let r = std::panic::catch_unwind(|| {
+        WrappedDivisionIndex {}.lagrangian::<f64>(&[0.1; 4], &[0.0; 4])
+    });
+    assert!(
+        r.is_ok_and(|x| x.is_nan()),
+        "(0 - 1) / 2 wraps: a checked index"
+    );
+    let q: [f64; 256] = std::array::from_fn(|k| 0.01 * k as f64);
+    let plain = -(0..300)
+        .map(|i| 0.5 * 2.0 * q[(i as u8) as usize] * q[(i as u8) as usize])
+        .sum::<f64>();
+    let l = WrappingCastInRange { k: 2.0 }.lagrangian::<f64>(&q, &[0.0; 256]);
+    assert!(close(l, plain), "{l} vs {plain}");
+    let q = [0.1, 0.2, 0.3, 0.4, 0.5];
+    let plain = -(0..5)
+        .map(|i| (0..i).map(|j| q[i - 1] * q[j]).sum::<f64>())
+        .sum::<f64>();
+    assert!(close(
+        EmptyInnerRange {}.lagrangian::<f64>(&q, &[0.0; 5]),
+        plain
+    ));
+    assert_matches_general(&EmptyInnerRange {}, q, [0.1; 5]);
+}
+
+// A helper function that takes a whole coordinate array depends on it.
+
+fn trust_coupling<D: Scalar>(q: &[D; 2]) -> D {
+    q[0] * q[1] * 0.6 * q[0]
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 2]),
+    lagrangian = 0.5 * (q_dot[0] * q_dot[0] + q_dot[1] * q_dot[1])
+        - 0.5 * k * (q[0] * q[0] + q[1] * q[1]) - trust_coupling(q),
+)]
+struct ArrayArgument {
+    k: f64,
+}
+
+#[test]
+fn trust_array_argument_makes_the_call_dual() {
+    assert!(!ArrayArgument::STRUCTURE.linear);
+    assert_matches_general(&ArrayArgument { k: 1.0 }, [0.3, -0.7], [0.2, 0.5]);
+}
+
+// Integers computed from a coordinate or velocity (through integer methods, an index, a
+// range's end) make the mass piecewise: no constant-mass claim.
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = {
+        let j = if x_dot > 0.0 { 1 } else { 3 };
+        let m = j.max(1);
+        0.5 * (m as f64) * x_dot * x_dot
+    } - 0.5 * k * x * x,
+)]
+struct IntMethodMass {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 2]),
+    lagrangian = 0.5 * (q_dot[0] * q_dot[0] + q_dot[1] * q_dot[1])
+        + { let j = if q[0] > 0.0 { 0 } else { 1 }; q_dot[j] * q_dot[j] }
+        - 0.5 * k * (q[0] * q[0] + q[1] * q[1]),
+)]
+struct IndexChosenMass {
+    k: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = {
+        let n = if x > 0.0 { 1 } else { 3 };
+        (0..n).map(|_j| 0.5 * x_dot * x_dot).sum()
+    } - 0.5 * x * x,
+)]
+struct RangeEndMass {}
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = {
+        let n: i32 = if x > 0.0 { 1 } else { 3 };
+        if n.abs() == 1 { 0.5 * x_dot * x_dot } else { 1.5 * x_dot * x_dot }
+    } - 0.5 * x * x,
+)]
+struct AbsConditionMass {}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; N]),
+    lagrangian = (0..N).map(|i| {
+            let j = if q[i] > 0.0 { 10 } else { 11 };
+            let m = j.max(1);
+            0.05 * (m as f64) * q_dot[i] * q_dot[i]
+        }).sum()
+        - (0..N).map(|i| 0.5 * k * q[i] * q[i]).sum(),
+)]
+struct PiecewiseChain<const N: usize> {
+    k: f64,
+}
+
+#[test]
+fn trust_integers_from_coordinates_are_not_constant() {
+    assert!(!IntMethodMass::STRUCTURE.constant_mass);
+    assert!(!IndexChosenMass::STRUCTURE.constant_mass);
+    assert!(!RangeEndMass::STRUCTURE.constant_mass);
+    assert!(!AbsConditionMass::STRUCTURE.constant_mass);
+    assert!(!PiecewiseChain::<4>::STRUCTURE.constant_mass);
+    for s in [1.0, -1.0] {
+        assert_matches_general(&IntMethodMass { k: 1.0 }, [0.3 * s], [0.5 * s]);
+        assert_matches_general(&IndexChosenMass { k: 1.0 }, [0.3 * s, 0.2], [0.5, 0.1]);
+        assert_matches_general(&RangeEndMass {}, [0.3 * s], [0.5]);
+        assert_matches_general(&AbsConditionMass {}, [0.3 * s], [0.5]);
+        assert_matches_general(
+            &PiecewiseChain::<4> { k: 1.0 },
+            [0.3 * s, -0.2, 0.1, 0.4],
+            [0.5; 4],
+        );
+    }
+}
+
+// Integer constants are folded at the model's own integer type (`i32` by default), and an
+// index is a `usize` as in plain Rust.
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 1e-10 * x * x * (65536 * 65536) as f64,
+)]
+struct I32Product {}
+
+#[forced_lagrangian(
+    coordinates(q: [f64; 3]),
+    lagrangian = (0..3).map(|i| 0.5 * q_dot[i] * q_dot[i]).sum()
+        - (0..2).map(|i| 0.5 * q[((i * 1000000 * 10000) % 3).min(2)].powi(2)).sum(),
+)]
+struct UsizeIndexArithmetic {}
+
+#[test]
+fn trust_integer_types_match_the_models_code() {
+    assert_matches_general(&I32Product {}, [0.5], [0.1]);
+    let (q, v): ([f64; 3], [f64; 3]) = ([0.1, 0.2, 0.3], [0.0; 3]);
+    let plain = -(0..2usize)
+        .map(|i| 0.5 * q[((i * 1000000 * 10000) % 3).min(2)].powi(2_i32))
+        .sum::<f64>();
+    let l = UsizeIndexArithmetic {}.lagrangian::<f64>(&q, &v);
+    assert!(close(l, plain), "{l} vs {plain}");
+}
+
+// A power of a difference is not expanded into monomials that cancel.
+
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.25 * (x - c).powi(4),
+)]
+struct OffsetQuartic {
+    c: f64,
+}
+
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 0.25 * (y - x).powi(4)
+        - 0.1 * x * (x - y).powi(2),
+)]
+struct QuarticBond {}
+
+#[test]
+fn trust_powers_of_differences_keep_their_accuracy() {
+    for x in [1000.001, 1000.01, 1000.1] {
+        assert_matches_general(&OffsetQuartic { c: 1000.0 }, [x], [0.0]);
+    }
+    assert_matches_general(&QuarticBond {}, [100.0, 100.01], [0.0, 0.0]);
+}

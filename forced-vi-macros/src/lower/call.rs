@@ -65,7 +65,11 @@ impl Lowerer<'_> {
             let rt = recv.operand();
             let at = args.iter().map(|a| &a.tokens);
             out.kind = Kind::Int;
-            out.degree = Degree::CONST;
+            // An integer computed from a coordinate or velocity is piecewise in it.
+            out.degree = std::iter::once(&recv)
+                .chain(&args)
+                .fold(Degree::CONST, |d, a| d.max(a.degree))
+                .opaque();
             out.inexact = std::iter::once(&recv)
                 .chain(&args)
                 .find_map(|a| a.inexact.clone());
@@ -147,7 +151,8 @@ impl Lowerer<'_> {
                     kind: item,
                     uses: recv.uses.clone(),
                     names: BTreeSet::new(),
-                    degree: Degree::CONST,
+                    // A range whose ends depend on a coordinate gives such items.
+                    degree: recv.degree.opaque(),
                     range: recv.range,
                     inexact: None,
                 };
@@ -155,7 +160,16 @@ impl Lowerer<'_> {
                 out.absorb(&body);
                 out.degree = out.degree.max(body.degree);
                 out.kind = Kind::Iter(Box::new(body.kind.clone()));
-                out.range = body.range;
+                // The items' range is exact only if some item is produced.
+                let nonempty = recv.range.is_some_and(|r| r.exact && r.lo <= r.hi);
+                out.range = body.range.map(|b| IntRange {
+                    exact: b.exact && nonempty,
+                    ..b
+                });
+                if recv.degree != Degree::CONST {
+                    // How many items there are depends on a coordinate or velocity.
+                    out.degree = out.degree.opaque();
+                }
                 let bt = &body.tokens;
                 let inputs = &c.inputs;
                 out.tokens = quote!(#rt.#method(|#inputs| #bt));
@@ -179,6 +193,9 @@ impl Lowerer<'_> {
                 for a in &m.args {
                     let la = self.expr(a);
                     out.absorb(&la);
+                    if la.degree != Degree::CONST {
+                        out.degree = out.degree.max(la.degree).opaque();
+                    }
                     args.push(la.tokens);
                 }
                 if name != "rev" {
@@ -200,10 +217,32 @@ impl Lowerer<'_> {
         let mut args = Vec::new();
         let mut degree = Degree::CONST;
         for a in &c.args {
-            let la = self.expr(a);
+            let mut la = self.expr(a);
+            if let Kind::Array(g) = la.kind {
+                // A whole coordinate or velocity array: the function may read any entry.
+                let Some((bg, vel)) = self.array_of(&la).filter(|(bg, _)| *bg == g) else {
+                    return self.unsupported(
+                        a,
+                        "passing an array that is not one known coordinate or velocity array",
+                    );
+                };
+                la.uses.insert(Var {
+                    vel,
+                    group: bg,
+                    idx: Idx::All,
+                });
+                la.degree = la.degree.max(var_degree(vel));
+            }
             out.absorb(&la);
             degree = degree.max(la.degree);
-            if la.kind == Kind::Dual {
+            // Anything that depends on a coordinate or velocity (a number, an array, an
+            // iterator over them) makes the result depend on it too.
+            let depends = !la.uses.is_empty()
+                || la.degree != Degree::CONST
+                || la.names.contains(super::TIME)
+                || matches!(la.kind, Kind::Dual | Kind::Array(_))
+                || matches!(&la.kind, Kind::Iter(k) if **k == Kind::Dual);
+            if depends {
                 out.kind = Kind::Dual;
             }
             args.push(la.tokens);
@@ -222,8 +261,17 @@ impl Lowerer<'_> {
         let Some(group) = self.env.groups.get(g) else {
             return Lowered::new(TokenStream::new(), Kind::Real);
         };
-        let velocity = group.velocity.to_string();
-        let vel = base.names.contains(&velocity);
+        // Which array this is (the coordinates or the velocities of the group): its
+        // names must say so unambiguously.
+        let vel = match self.array_of(&base) {
+            Some((bg, vel)) if bg == g => vel,
+            _ => {
+                return self.unsupported(
+                    &i.expr,
+                    "indexing an array that is not one known coordinate or velocity array (chosen by an `if`, or assigned another one)",
+                )
+            }
+        };
         let name = if vel { &group.velocity } else { &group.name };
         let len = group.len.literal();
         let in_range = |k: i64| len.is_some_and(|n| usize::try_from(k).is_ok_and(|k| k < n));
@@ -269,6 +317,10 @@ impl Lowerer<'_> {
             idx: at,
         });
         out.degree = var_degree(vel);
+        if idx.degree != Degree::CONST {
+            // The entry is chosen by a coordinate or velocity: piecewise.
+            out.degree = out.degree.max(idx.degree).opaque();
+        }
         let (bt, it) = (&base.tokens, &idx.tokens);
         out.tokens = if proven {
             quote!(#bt[#it])
@@ -279,10 +331,32 @@ impl Lowerer<'_> {
             let index = &i.index;
             let what = format!("{}[{}]", name, compact(&quote!(#index).to_string()));
             let span = i.span();
-            quote_spanned!(span=> ::forced_vi::__private::at(&#bt[..], #it, #what))
+            // The index is a `usize`, as in `q[i]`: inference gives the integers it is
+            // computed from the types plain Rust would.
+            quote_spanned!(span=> ::forced_vi::__private::at::<_, usize>(&#bt[..], #it, #what))
         };
         out.atomic = true;
         out
+    }
+
+    /// The one coordinate or velocity array (group, is-velocity) that an array-valued
+    /// expression is, by the array names it carries; `None` if not exactly one.
+    pub(super) fn array_of(&self, l: &Lowered) -> Option<(usize, bool)> {
+        let mut found = BTreeSet::new();
+        for (g, group) in self.env.groups.iter().enumerate() {
+            if !group.array {
+                continue;
+            }
+            for (vel, name) in [(false, &group.name), (true, &group.velocity)] {
+                if l.names.contains(&name.to_string()) {
+                    found.insert((g, vel));
+                }
+            }
+        }
+        match (found.len(), found.first()) {
+            (1, Some(&x)) => Some(x),
+            _ => None,
+        }
     }
 
     pub(super) fn cast(&mut self, c: &syn::ExprCast) -> Lowered {
@@ -315,6 +389,19 @@ impl Lowerer<'_> {
         if is_float || inner.kind != Kind::Int {
             out.range = None;
         }
+        // An integer cast keeps the values only if all of them fit the target type
+        // (`(i as i8) as usize` wraps 128 to 2⁶⁴ − 128); otherwise they are unknown.
+        let target = match &*c.ty {
+            syn::Type::Path(p) if p.qself.is_none() => p
+                .path
+                .get_ident()
+                .and_then(|t| super::int_type_bounds(&t.to_string())),
+            _ => None,
+        };
+        out.range = match target {
+            Some((lo, hi)) => out.range.filter(|r| r.lo >= lo && r.hi <= hi),
+            None => None,
+        };
         let t = inner.operand();
         out.tokens = quote!(#t as #ty);
         out.atomic = false;

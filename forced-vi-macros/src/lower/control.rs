@@ -100,6 +100,17 @@ impl Lowerer<'_> {
         if is_f64 {
             le.make_real();
         }
+        if let Some(t) = ty.filter(|_| le.kind == Kind::Int) {
+            // A typed integer (`let j: u8 = i;`) keeps its values only if all fit the type.
+            let bounds = match &**t {
+                syn::Type::Path(p) if p.qself.is_none() => p
+                    .path
+                    .get_ident()
+                    .and_then(|t| super::int_type_bounds(&t.to_string())),
+                _ => None,
+            };
+            le.range = bounds.and_then(|(lo, hi)| le.range.filter(|r| r.lo >= lo && r.hi <= hi));
+        }
         // An accumulator `let mut s = 0.0;` becomes a dual: it will collect dual terms.
         let promote = pi.mutability.is_some() && le.kind == Kind::Real && ty.is_none();
         let kind = if promote { Kind::Dual } else { le.kind.clone() };
@@ -155,6 +166,19 @@ impl Lowerer<'_> {
             return out;
         };
         out.absorb(&else_b);
+        let array = |k: &Kind| matches!(k, Kind::Array(_));
+        if array(&then_b.kind) || array(&else_b.kind) {
+            // An array chosen by a condition: which coordinates it holds is not known here.
+            let (a, b) = (self.array_of(&then_b), self.array_of(&else_b));
+            if then_b.kind != else_b.kind || a.is_none() || a != b {
+                self.unsupported(
+                    i,
+                    "an `if` that chooses between coordinate or velocity arrays (index them inside the branches instead)",
+                );
+                // Read on as the first array: one error, at the `if`.
+                return then_b;
+            }
+        }
         let mut degree = then_b.degree.max(else_b.degree);
         if cond.degree != Degree::CONST {
             degree = degree.max(cond.degree).opaque();
@@ -241,7 +265,9 @@ impl Lowerer<'_> {
             names: iter.names.clone(),
             degree: iter.degree,
         });
-        let dead = iter.range.is_some_and(|r| r.lo > r.hi);
+        // A body that may run for no value (an empty range, or one whose ends are not
+        // known: `(0..i)` at `i = 0`) reports no out-of-range index either.
+        let dead = !iter.range.is_some_and(|r| r.exact && r.lo <= r.hi);
         let param = Local {
             range: param.range.filter(|r| r.lo <= r.hi),
             ..param
@@ -347,7 +373,7 @@ impl Lowerer<'_> {
             kind: *item,
             uses: iter.uses.clone(),
             names: BTreeSet::new(),
-            degree: Degree::CONST,
+            degree: iter.degree.opaque(),
             range: iter.range,
             inexact: None,
         };
@@ -371,6 +397,9 @@ impl Lowerer<'_> {
         let e = self.expr(end);
         out.absorb(&s);
         out.absorb(&e);
+        // Ends that depend on a coordinate or velocity: so does everything the range
+        // reaches (its items, how many there are).
+        out.degree = s.degree.max(e.degree).opaque();
         out.atomic = false;
         let closed = matches!(r.limits, syn::RangeLimits::Closed(_));
         out.range = match (s.range, e.range) {

@@ -18,6 +18,9 @@ impl Lowerer<'_> {
             return Lowered::new(TokenStream::new(), Kind::Real);
         }
         self.budget.set(left - 1);
+        if self.wrap.is_none() {
+            self.wrap = Some(super::wrap_bounds(&e.to_token_stream()));
+        }
         if left == 1 {
             self.cx.error_spanned_by(
                 e,
@@ -244,7 +247,13 @@ impl Lowerer<'_> {
         };
         out.degree = arithmetic_degree(b.op, l.degree, r.degree);
         if out.kind == Kind::Int {
-            out.range = int_op(b.op, l.range, r.range);
+            // Ranges are computed in i64: a result (or an operand) beyond what the model's
+            // integer type holds wraps at run time, so it is unknown here.
+            out.range = self.unwrapped(int_op(
+                b.op,
+                self.unwrapped(l.range),
+                self.unwrapped(r.range),
+            ));
             if matches!(b.op, BinOp::Div(_) | BinOp::Rem(_))
                 && r.range.and_then(|r| r.single()) == Some(0)
             {
@@ -258,7 +267,10 @@ impl Lowerer<'_> {
             }
             out.inexact = l.inexact.clone().or_else(|| r.inexact.clone());
             if out.inexact.is_none() {
-                out.inexact = inexact(b, l.range, r.range, out.range);
+                // Overflow as the default `i32` arithmetic of unsuffixed literals.
+                let i32_range = int_op(b.op, l.range, r.range)
+                    .filter(|x| x.lo >= i64::from(i32::MIN) && x.hi <= i64::from(i32::MAX));
+                out.inexact = inexact(b, l.range, r.range, i32_range);
             }
             // Integer arithmetic wraps instead of panicking: an index that wraps is out of
             // range, which the checked access reports.
@@ -351,6 +363,11 @@ impl Lowerer<'_> {
             );
             return Lowered::new(TokenStream::new(), Kind::Unit);
         };
+        let array = |k: &Kind| matches!(k, Kind::Array(_));
+        if array(&r.kind) || self.lookup(&name).is_some_and(|(_, l)| array(&l.kind)) {
+            // Which coordinates the local holds would depend on where it was assigned.
+            return self.unsupported(left, "assigning a coordinate or velocity array");
+        }
         // The regions entered since the local was declared decide whether it is assigned.
         let ctrl: Vec<Ctrl> = self
             .ctrl

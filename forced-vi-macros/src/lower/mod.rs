@@ -114,6 +114,10 @@ pub struct Lowerer<'a> {
     lift_real: bool,
     /// Where the expression is, for messages: "the Lagrangian", "the force on `x`".
     place: String,
+    /// The values that integer arithmetic is trusted to reach without wrapping: the
+    /// narrowest integer type the expression may compute in (`i32` by default, `u8` if it
+    /// names one...). A result outside is unknown. Set at the first expression lowered.
+    wrap: Option<(i64, i64)>,
 }
 
 const UNSUPPORTED: &str = "is not supported in a model expression; use arithmetic, method calls such as `sin()` or `powi(2)`, `let`, `if`, `for` loops over ranges, and `(a..b).map(|i| ...).sum()`";
@@ -130,6 +134,7 @@ impl<'a> Lowerer<'a> {
             dead: 0,
             lift_real: false,
             place: place.into(),
+            wrap: None,
         }
     }
 
@@ -172,6 +177,14 @@ impl<'a> Lowerer<'a> {
             .find_map(|(k, s)| s.get(name).map(|l| (k, l)))
     }
 
+    /// The range `r` if integer arithmetic reaches it without wrapping (see `wrap`).
+    fn unwrapped(&self, r: Option<IntRange>) -> Option<IntRange> {
+        let (lo, hi) = self
+            .wrap
+            .unwrap_or((i64::from(i32::MIN), i64::from(i32::MAX)));
+        r.filter(|r| r.lo >= lo && r.hi <= hi)
+    }
+
     fn unsupported(&self, tokens: impl ToTokens, what: &str) -> Lowered {
         self.cx
             .error_spanned_by(tokens, format!("{what} {UNSUPPORTED}"));
@@ -192,12 +205,62 @@ impl<'a> Lowerer<'a> {
             dead: self.dead,
             lift_real: false,
             place: self.place.clone(),
+            wrap: self.wrap,
         };
         let out = f(&mut l);
         // The quiet context's errors are reported by the real pass.
         let _ = quiet.check();
         out
     }
+}
+
+/// The value bounds of a primitive integer type named `name`.
+pub(crate) fn int_type_bounds(name: &str) -> Option<(i64, i64)> {
+    Some(match name {
+        "i8" => (i8::MIN.into(), i8::MAX.into()),
+        "u8" => (0, u8::MAX.into()),
+        "i16" => (i16::MIN.into(), i16::MAX.into()),
+        "u16" => (0, u16::MAX.into()),
+        "i32" => (i32::MIN.into(), i32::MAX.into()),
+        "u32" => (0, u32::MAX.into()),
+        "i64" | "isize" | "i128" => (i64::MIN, i64::MAX),
+        "u64" | "usize" | "u128" => (0, i64::MAX),
+        _ => return None,
+    })
+}
+
+/// The values integer arithmetic in `t` can reach without wrapping in any of the integer
+/// types it may compute in: `i32` (the default of an unsuffixed literal) narrowed by every
+/// 8- or 16-bit type that `t` names (as a cast, a `let` type or a literal suffix), since
+/// Rust's inference may give that type to any integer of the expression.
+fn wrap_bounds(t: &TokenStream) -> (i64, i64) {
+    let mut b = (i64::from(i32::MIN), i64::from(i32::MAX));
+    let mut narrow = |name: &str| {
+        if matches!(name, "i8" | "u8" | "i16" | "u16") {
+            if let Some((lo, hi)) = int_type_bounds(name) {
+                b = (b.0.max(lo), b.1.min(hi));
+            }
+        }
+    };
+    fn walk(t: &TokenStream, f: &mut dyn FnMut(&str)) {
+        for tt in t.clone() {
+            match tt {
+                proc_macro2::TokenTree::Ident(i) => f(&i.to_string()),
+                proc_macro2::TokenTree::Literal(l) => {
+                    let s = l.to_string();
+                    for suffix in ["i8", "u8", "i16", "u16"] {
+                        if s.ends_with(suffix) && !s.starts_with('"') {
+                            f(suffix);
+                        }
+                    }
+                }
+                proc_macro2::TokenTree::Group(g) => walk(&g.stream(), f),
+                proc_macro2::TokenTree::Punct(_) => {}
+            }
+        }
+    }
+    walk(t, &mut narrow);
+    b
 }
 
 /// Token text without the spaces that `TokenStream::to_string` puts between punctuation:

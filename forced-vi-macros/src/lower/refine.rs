@@ -21,6 +21,7 @@ impl Lowerer<'_> {
         let understood = self.facts(cond, positive, &mut facts);
         let saved = self.scopes.clone();
         let mut dead = false;
+        let mut unsure = false;
         for (name, lo, hi) in &facts {
             let Some((depth, local)) = self.lookup(name) else {
                 continue;
@@ -28,6 +29,16 @@ impl Lowerer<'_> {
             let Some(r) = local.range else {
                 continue;
             };
+            if r.lo < 0 {
+                // A negative value may be an unsigned one that wrapped (`i - 1` at `i = 0`
+                // is `usize::MAX`): the comparison is not about these values. The local
+                // keeps its range, as not all of it reached here.
+                if let Some(l) = self.scopes.get_mut(depth).and_then(|s| s.get_mut(name)) {
+                    l.range = Some(IntRange { exact: false, ..r });
+                }
+                unsure = true;
+                continue;
+            }
             let nr = IntRange {
                 lo: r.lo.max(*lo),
                 hi: r.hi.min(*hi),
@@ -53,11 +64,13 @@ impl Lowerer<'_> {
                 }
             }
         }
-        if dead {
+        // A branch that may be unreachable reports no out-of-range index either.
+        let quiet = dead || unsure;
+        if quiet {
             self.dead += 1;
         }
         let out = f(self);
-        if dead {
+        if quiet {
             self.dead -= 1;
         }
         // Restore the ranges narrowed for the branch; keep what the branch assigned.
@@ -192,6 +205,10 @@ pub(super) fn int_op(op: BinOp, l: Option<IntRange>, r: Option<IntRange>) -> Opt
         BinOp::Mul(_) => corners(i64::checked_mul),
         BinOp::Div(_) => {
             let k = r.single().filter(|&k| k > 0)?;
+            if l.lo < 0 {
+                // A negative dividend may be an unsigned integer that wrapped.
+                return None;
+            }
             Some(IntRange {
                 lo: l.lo.checked_div(k)?,
                 hi: l.hi.checked_div(k)?,

@@ -107,7 +107,12 @@ impl Extractor<'_> {
                 out.add(&r.neg()?)?;
                 Some(out)
             }
-            BinOp::Mul(_) => l.mul(&r),
+            BinOp::Mul(_) => {
+                if cancels(&l, &r) {
+                    return None;
+                }
+                l.mul(&r)
+            }
             BinOp::Div(_) => {
                 let c = r.as_constant()?;
                 let inv = match c.as_number() {
@@ -132,6 +137,9 @@ impl Extractor<'_> {
             let n = u32::try_from(n).ok().filter(|&n| n <= MAX_DEGREE)?;
             let mut out = Poly::constant(Coef::number(1.0)?);
             for _ in 0..n {
+                if cancels(&out, &recv) {
+                    return None;
+                }
                 out = out.mul(&recv)?;
             }
             return Some(out);
@@ -197,7 +205,11 @@ impl Extractor<'_> {
                 Lit::Int(i)
                     if i.suffix().is_empty() || i.suffix() == "usize" || i.suffix() == "i32" =>
                 {
-                    Some((i.base10_parse().ok()?, i.suffix() == "usize"))
+                    // An unsuffixed literal is an `i32` (its default type) in the model's
+                    // own code: arithmetic is folded at that type, or not at all.
+                    let v: i64 = i.base10_parse().ok()?;
+                    let unsigned = i.suffix() == "usize";
+                    fits(v, unsigned).then_some((v, unsigned))
                 }
                 _ => None,
             },
@@ -217,10 +229,41 @@ impl Extractor<'_> {
                     _ => None,
                 }?;
                 let unsigned = lu || ru;
-                (!unsigned || v >= 0).then_some((v, unsigned))
+                fits(v, unsigned).then_some((v, unsigned))
             }
             _ => None,
         }
+    }
+}
+
+/// Whether the expanded product `a * b` may cancel catastrophically: a sum (or difference)
+/// multiplied into a product of degree 3 or more, as `(x - c).powi(4)` or
+/// `x * (x - c).powi(2)`, whose monomials are large where the value (and its derivatives)
+/// are small (at `x ≈ c`).
+/// Such a product is left to the dual-number kernels, which evaluate the user's form.
+/// (Up to degree 2 the derivatives of the expansion, linear or constant, are as accurate as
+/// the user's form.)
+fn cancels(a: &Poly, b: &Poly) -> bool {
+    let deg = |p: &Poly| p.monomials().map(super::degree).max().unwrap_or(0);
+    let sum = |p: &Poly| p.0.len() >= 2;
+    if deg(a) + deg(b) < 3 {
+        return false;
+    }
+    // Two sums (`(x - c) * (y - d) * (z - e)`), or a sum times a factor in its own
+    // variables (a power). A sum times a monomial in other variables (`(eps - x * x) *
+    // x_dot`) only distributes: its derivatives are the user's form.
+    let shared = !a.slots().is_disjoint(&b.slots());
+    (sum(a) && sum(b)) || ((sum(a) || sum(b)) && shared)
+}
+
+/// Whether `v` is a value of the type the model's code computes it in: `usize` (no wrap
+/// below zero), else `i32` (the default of unsuffixed literals; a value beyond it wraps
+/// there, so it is not folded here).
+fn fits(v: i64, unsigned: bool) -> bool {
+    if unsigned {
+        v >= 0
+    } else {
+        i32::try_from(v).is_ok()
     }
 }
 
