@@ -511,3 +511,48 @@ fn trust_powers_of_differences_keep_their_accuracy() {
     }
     assert_matches_general(&QuarticBond {}, [100.0, 100.01], [0.0, 0.0]);
 }
+
+/// A parameter cast to an integer (`x.powi(k as i32)`) and to `f64`.
+#[forced_lagrangian(coordinates(x),
+    lagrangian = 0.5 * x_dot * x_dot - 0.5 * x.powi(k as i32) - 0.5 * c * (k as f64) * x * x)]
+struct ParameterCasts {
+    k: f64,
+    c: f64,
+}
+
+/// A cast of a parameter compiles in the code that differentiates in the parameters, where
+/// the parameter is a `__D` value: `k as f64` keeps its derivative, and `k as i32` takes the
+/// real part (no derivative, as in the `f64` code). Before, the model did not compile: rustc
+/// refused `__D as i32` (E0605) at the whole attribute. The sensitivities match central
+/// differences of the flow.
+#[test]
+fn trust_parameter_casts_compile_and_differentiate() {
+    let init = InitialState::from_velocity([0.5], [0.0]);
+    let end = |k: f64, c: f64| {
+        Integrator::new(&ParameterCasts { k, c }, Scheme::lobatto(3).unwrap(), 0.01)
+            .unwrap()
+            .final_state(init, 1.0)
+            .unwrap()
+            .q[0]
+    };
+    let model = ParameterCasts { k: 2.5, c: 0.3 };
+    let s = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01)
+        .unwrap()
+        .sensitivities(init, 1.0)
+        .unwrap();
+    let d = 1e-6;
+    let fd_k = (end(2.5 + d, 0.3) - end(2.5 - d, 0.3)) / (2.0 * d);
+    let fd_c = (end(2.5, 0.3 + d) - end(2.5, 0.3 - d)) / (2.0 * d);
+    for (what, got, fd) in [
+        ("k", s.wrt_parameters[(0, 0)], fd_k),
+        ("c", s.wrt_parameters[(0, 1)], fd_c),
+    ] {
+        assert!(
+            (got - fd).abs() <= 1e-8 * fd.abs().max(1.0),
+            "d q / d {what}: {got} against {fd}"
+        );
+    }
+    // The integer power: `k = 2.5` reads `x²`, as the model's `f64` code does.
+    let l = model.lagrangian::<f64>(&[0.5], &[0.1]);
+    assert_eq!(l, 0.5 * 0.1 * 0.1 - 0.5 * 0.25 - 0.5 * 0.3 * 2.5 * 0.25);
+}

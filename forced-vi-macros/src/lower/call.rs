@@ -379,6 +379,24 @@ impl Lowerer<'_> {
             return out;
         }
         let is_float = matches!(&*c.ty, syn::Type::Path(p) if p.path.is_ident("f64"));
+        if inner.kind == Kind::Dual {
+            // A parameter in the code that differentiates in the parameters, where it is a
+            // `__D` value: `k as f64` is `k` itself (its derivative kept), and a cast to an
+            // integer takes its real part (an integer of it has no derivative, as in the
+            // `f64` code). Rustc would reject `__D as i32` at the whole attribute.
+            let t = inner.operand();
+            let span = c.span();
+            let mut out = inner.clone();
+            out.lit_f64 = None;
+            out.range = None;
+            if is_float {
+                return out;
+            }
+            out.kind = Kind::Int;
+            out.tokens = quote_spanned!(span=> (::forced_vi::__private::re(#t) as #ty));
+            out.atomic = true;
+            return out;
+        }
         let mut out = inner.clone();
         out.kind = if is_float { Kind::Real } else { Kind::Int };
         out.lit_f64 = None;
