@@ -122,6 +122,52 @@ impl Lowerer<'_> {
             out.tokens = quote!(#rt.#method(#(#at),*));
             return out;
         }
+        // A parameter in the code that differentiates in the parameters, where it is a
+        // `__D` value, with a method of `f64` that `__D` lacks: those whose value is
+        // piecewise constant take its real part (no derivative, as in the `f64` code), and
+        // `to_radians` / `to_degrees` scale it. Rustc would reject the call at the whole
+        // attribute.
+        let params_only = recv.uses.is_empty()
+            && !recv.names.is_empty()
+            && recv
+                .names
+                .iter()
+                .all(|n| self.env.params.iter().any(|p| p == n));
+        if self.env.params_dual && recv.kind == Kind::Dual && params_only && args.is_empty() {
+            let rt = recv.operand();
+            let span = m.span();
+            let piecewise = matches!(
+                name.as_str(),
+                "floor"
+                    | "ceil"
+                    | "round"
+                    | "round_ties_even"
+                    | "trunc"
+                    | "is_sign_negative"
+                    | "is_sign_positive"
+                    | "is_nan"
+                    | "is_finite"
+                    | "is_infinite"
+                    | "is_normal"
+            );
+            let scale = match name.as_str() {
+                "to_radians" => Some(std::f64::consts::PI / 180.0),
+                "to_degrees" => Some(180.0 / std::f64::consts::PI),
+                _ => None,
+            };
+            if piecewise {
+                out.kind = Kind::Real;
+                out.degree = Degree::CONST;
+                out.tokens = quote_spanned!(span=> ::forced_vi::__private::re(#rt).#method());
+                return out;
+            }
+            if let Some(f) = scale {
+                let f = proc_macro2::Literal::f64_suffixed(f);
+                out.tokens = quote_spanned!(span=> (#rt * #f));
+                out.atomic = true;
+                return out;
+            }
+        }
         dual_method(m, &recv, args, out)
     }
 
