@@ -1646,3 +1646,38 @@ fn trust_constrained_initial_data_are_checked_in_the_units_of_q() {
             .unwrap_or_else(|f| panic!("l = {l:e}, projected: {}", f.error));
     }
 }
+
+/// `L = ½v² − ½x² + e ln(x + ½)` with `e = 0`: its value is NaN past `x = −½`, its
+/// derivatives are finite (zero times a finite number).
+struct NanValue {
+    e: f64,
+}
+
+impl ForcedLagrangian<1> for NanValue {
+    fn lagrangian<D: Scalar>(&self, q: &[D; 1], v: &[D; 1]) -> D {
+        (v[0] * v[0] - q[0] * q[0]) * 0.5 + (q[0] + 0.5).ln() * self.e
+    }
+}
+
+/// A Lagrangian whose value is NaN at a small state is the model's fault, whatever the
+/// output: `Final` checks its one record as `Records` checks each. Before, `Final` reported
+/// `Overflow { quantity: "energy" }` at the end, of a state of size 1.
+#[test]
+fn trust_a_nan_lagrangian_value_is_the_models_on_every_output() {
+    let integ = Integrator::new(&NanValue { e: 0.0 }, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
+    let init = InitialState::from_velocity([1.0], [0.0]);
+    let final_state = integ
+        .final_state(init, 3.0)
+        .map(|_| ())
+        .map_err(|f| f.error);
+    let records = integ
+        .solve(init, 3.0, output::Records)
+        .map(|_| ())
+        .map_err(|f| f.error);
+    for (what, r) in [("final", final_state), ("records", records)] {
+        assert!(
+            matches!(r, Err(Error::NonFiniteModel { .. })),
+            "{what}: {r:?}"
+        );
+    }
+}

@@ -53,7 +53,7 @@ use crate::error::Error;
 use crate::model::{ForcedLagrangian, NodeJacobian};
 use crate::newton::NewtonOptions;
 use crate::scheme::Scheme;
-use crate::trajectory::{RunFailure, RunStats, StepRecord, energy, non_finite_field};
+use crate::trajectory::{RunFailure, RunStats, StepRecord, energy};
 
 use state::State;
 
@@ -355,12 +355,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             if self.lean {
                 rec.energy_balance = 0.0;
             }
-            match non_finite_field(&rec) {
-                Some(quantity) => Err(Error::Overflow {
-                    step: self.k,
-                    t: self.t,
-                    quantity,
-                }),
+            // As for every record: a NaN energy at a representable state is the model's
+            // (a Lagrangian that is NaN there, with finite derivatives), not an overflow.
+            let size = || rec.q.amax().max(rec.p.amax()).max(rec.v.amax());
+            match checks::record_error(&rec, size, self.k, self.t) {
+                Some(error) => Err(error),
                 None => Ok(rec),
             }
         })
