@@ -398,7 +398,11 @@
 //!
 //! **Output times.** In a run with [`output::Samples`](crate::output::Samples), a step over
 //! the next output time ends on it, so that every output is a step's end, held to the
-//! tolerance as the others are. The controller's history stays that of the steps it chose,
+//! tolerance as the others are. An output within the run's smallest step
+//! (`16 ε max(|t|, T)`) after a step's end is that end to round-off: no step lands on it,
+//! and the next one does on the first output past it (an output 1e-14 after another had
+//! hidden the outputs behind it, interpolated over the whole next step: 1.6e-2 off at tol
+//! 1e-10); one that close before `T` is the end state (the sliver after it was refused). The controller's history stays that of the steps it chose,
 //! and the step it planned stays on offer after the output. This costs up to one step more
 //! per output time, and a step per output where the outputs are closer than the steps.
 //! Coupled van der Pol, T = 10, run time against the run without outputs, for 11, 101 and
