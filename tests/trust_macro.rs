@@ -538,7 +538,7 @@ fn trust_parameter_casts_compile_and_differentiate() {
     let model = ParameterCasts { k: 2.5, c: 0.3 };
     let s = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01)
         .unwrap()
-        .sensitivities(init, 1.0)
+        .solve(init, 1.0, output::Tangents)
         .unwrap();
     let d = 1e-6;
     let fd_k = (end(2.5 + d, 0.3) - end(2.5 - d, 0.3)) / (2.0 * d);
@@ -585,7 +585,7 @@ fn trust_parameter_methods_compile_and_differentiate() {
         0.01,
     )
     .unwrap()
-    .sensitivities(init, 1.0)
+    .solve(init, 1.0, output::Tangents)
     .unwrap();
     let d = 1e-6;
     let fd = (end(2.5 + d) - end(2.5 - d)) / (2.0 * d);

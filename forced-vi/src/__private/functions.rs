@@ -57,6 +57,15 @@ pub fn powf<D: Scalar>(x: D, n: f64) -> D {
     y
 }
 
+/// The real part of a scalar: a cast of a parameter to an integer in the code that
+/// differentiates in the parameters (`lagrangian_with`, `force_with`), where the parameter
+/// is a `__D` value. An integer of a parameter has no derivative (it is piecewise constant),
+/// as in the `f64` code.
+#[inline]
+pub fn re<D: Scalar>(x: D) -> f64 {
+    x.re()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,13 +150,4 @@ mod tests {
         }
         assert!((tanh(2.5f64) - 2.5f64.tanh()).abs() <= 2.0 * f64::EPSILON);
     }
-}
-
-/// The real part of a scalar: a cast of a parameter to an integer in the code that
-/// differentiates in the parameters (`lagrangian_with`, `force_with`), where the parameter
-/// is a `__D` value. An integer of a parameter has no derivative (it is piecewise constant),
-/// as in the `f64` code.
-#[inline]
-pub fn re<D: Scalar>(x: D) -> f64 {
-    x.re()
 }
