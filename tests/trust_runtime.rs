@@ -3,7 +3,7 @@
 //! of the trust issue: `cargo test --release --test models_suite trust_runtime::`.
 
 use forced_vi::prelude::*;
-use forced_vi::{Error, NewtonOptions, SchemeError, StepOptions};
+use forced_vi::{Error, LinearPath, NewtonOptions, SchemeError, StepOptions};
 
 /// `L = ½v² − ½q²`, `F = −c v`.
 struct Damped {
@@ -1644,6 +1644,95 @@ fn trust_constrained_initial_data_are_checked_in_the_units_of_q() {
         integ
             .final_state(projected, 0.1)
             .unwrap_or_else(|f| panic!("l = {l:e}, projected: {}", f.error));
+    }
+}
+
+#[forced_lagrangian(coordinates(x, y),
+    lagrangian = 0.5 * mass * (x_dot * x_dot + y_dot * y_dot) - mass * grav * y,
+    force(x = -0.1 * mass * x_dot, y = -0.1 * mass * y_dot),
+    constraints(0.5 * factor * (x * x + y * y - l * l)))]
+struct UnitsPendulum {
+    mass: f64,
+    grav: f64,
+    l: f64,
+    factor: f64,
+}
+
+/// A constrained model is solved the same in any units: lengths (l = 1e-4 to 1e6 with the
+/// gravity in the same unit), masses (1e-6 to 1e6), and its constraint multiplied by
+/// 1e-12 to 1e12, on the dense path. Before, the step equations' constraint rows
+/// were in the constraint's units and its multipliers in `1 / |G|`: a pendulum in
+/// micrometres ended in `NewtonFailed` (adaptive lobatto2–4), one with its constraint
+/// multiplied by 1e12 failed at step 1 with fixed steps, and once the rows were scaled,
+/// one with 1e12 ran 3e-8 off (its multipliers below the Newton's absolute tolerance).
+#[test]
+fn trust_constrained_models_solve_the_same_in_any_units() {
+    let th = 0.8f64;
+    let run = |model: &UnitsPendulum, path: LinearPath, adaptive: bool, s: usize| {
+        let l = model.l;
+        let init = InitialState::from_velocity([l * th.sin(), -l * th.cos()], [0.0, 0.0]);
+        let scheme = Scheme::lobatto(s).unwrap();
+        let integ = if adaptive {
+            Integrator::adaptive(model, scheme, 1e-8, 1e-8 * l)
+        } else {
+            Integrator::new(model, scheme, 0.01)
+        };
+        let end = integ
+            .unwrap()
+            .linear_path(path)
+            .final_state(init, 3.0)
+            .unwrap_or_else(|f| {
+                panic!("{path:?} lobatto{s} adaptive {adaptive}, l = {l:e}, mass {:e}, factor {:e}: {}",
+                    model.mass, model.factor, f.error)
+            });
+        [end.q[0] / l, end.q[1] / l]
+    };
+    let metres = UnitsPendulum {
+        mass: 1.0,
+        grav: 9.81,
+        l: 1.0,
+        factor: 1.0,
+    };
+    // The exact end, to about 1e-13: lobatto5 in metres at h = 1e-3.
+    let exact = {
+        let init = InitialState::from_velocity([th.sin(), -th.cos()], [0.0, 0.0]);
+        let integ = Integrator::new(&metres, Scheme::lobatto(5).unwrap(), 1e-3).unwrap();
+        integ.final_state(init, 3.0).unwrap().q
+    };
+    let cases = [
+        (1.0, 1e-4, 1.0),
+        (1.0, 1e6, 1.0),
+        (1e-6, 1.0, 1.0),
+        (1e6, 1.0, 1.0),
+        (1.0, 1.0, 1e12),
+        (1.0, 1.0, 1e-12),
+        (1e-6, 1e6, 1e-12),
+        (1e6, 1e-4, 1e12),
+    ];
+    // The dense path: the sparse one keeps its rows and unknowns unscaled (its Newton
+    // factors, kept across steps, do not survive factors that change at every step).
+    for path in [LinearPath::Dense] {
+        for s in [2, 3, 4] {
+            let fixed = run(&metres, path, false, s);
+            for (mass, l, factor) in cases {
+                let model = UnitsPendulum {
+                    mass,
+                    grav: 9.81 * l,
+                    l,
+                    factor,
+                };
+                let what =
+                    format!("{path:?} lobatto{s}, mass {mass:e}, l = {l:e}, factor {factor:e}");
+                // Fixed steps: the same steps in other units, to round-off.
+                let x = run(&model, path, false, s);
+                let d = (x[0] - fixed[0]).abs().max((x[1] - fixed[1]).abs());
+                assert!(d < 1e-10, "{what}, fixed: {x:?} against {fixed:?}");
+                // Adaptive steps (rtol 1e-8, atol 1e-8 l): within 10 times the tolerance.
+                let x = run(&model, path, true, s);
+                let d = (x[0] - exact[0]).abs().max((x[1] - exact[1]).abs());
+                assert!(d < 1e-7, "{what}, adaptive: {x:?} against {exact:?}");
+            }
+        }
     }
 }
 

@@ -34,6 +34,12 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     pub(crate) cons: usize,
     pub(crate) gval: Vec<f64>,
     pub(crate) gjac: Vec<DMatrix<f64>>,
+    /// The factors on each constraint's rows and on its unknowns, set for each solve
+    /// ([`StepProblem::scale_constraints`]): the Newton iteration's unknowns are
+    /// `ŵ_j / col_scale`; and scratch for the multipliers `ŵ_j` of a control point.
+    pub(crate) row_scale: Vec<f64>,
+    pub(crate) col_scale: Vec<f64>,
+    pub(crate) lam: Vec<f64>,
     /// The node blocks in `jacs` were given (interpolated from another scheme's, for the
     /// error estimate of [`crate::control`]): the Jacobian is assembled from them without
     /// evaluating the node kernels.
@@ -69,6 +75,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
             cons: _,
             gval,
             gjac,
+            row_scale,
+            col_scale,
+            lam,
             blocks_given,
             noise,
             noise_h,
@@ -88,6 +97,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
         *base_built = false;
         gval.fill(0.0);
         gjac.iter_mut().for_each(|g| g.fill(0.0));
+        row_scale.fill(1.0);
+        col_scale.fill(1.0);
+        lam.fill(0.0);
         *blocks_given = false;
         *noise = 0.0;
         *noise_h = 0.0;
@@ -334,12 +346,67 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
+    /// Sets the factors on each constraint's rows and unknowns for a solve with the
+    /// momentum scale `scale` from the guess `z` (see [`crate::newton::constraint_scales`]),
+    /// from the gradients at the step's start, `(t0, q0)`, already set, and the mass matrix
+    /// of the last Jacobian (at `(t0, q0)` at rest before the first); puts `z`'s multipliers
+    /// in the iteration's units ([`Self::unscale_multipliers`] takes them back).
+    pub(crate) fn scale_constraints(&mut self, scale: f64, z: &mut [f64]) {
+        let (s1, m) = (self.scheme.stages() - 1, self.cons);
+        let nz = s1 * N;
+        let largest = |x: &[f64]| x.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let x_size = largest(self.q0.as_slice()).max(largest(&z[..nz.min(z.len())]));
+        let mass = match self.jacs.first() {
+            Some(nj) => largest(nj.e.as_slice()),
+            None => {
+                let rest = SVector::<f64, N>::zeros();
+                let nj = self.model.node_jacobian_at(self.t0, &self.q0, &rest);
+                largest(nj.e.as_slice())
+            }
+        };
+        let g0 = &mut self.gjac[0];
+        crate::model::general::constraint_jacobian_at(
+            self.model,
+            self.t0,
+            &self.q0,
+            &mut self.gval,
+            g0,
+        );
+        for k in 0..m {
+            let g_norm = (0..N).fold(0.0f64, |a, c| a.max(g0[(k, c)].abs()));
+            (self.row_scale[k], self.col_scale[k]) =
+                crate::newton::constraint_scales(scale, g_norm, (x_size, mass));
+            for j in 0..s1 {
+                if let Some(w) = z.get_mut(nz + j * m + k) {
+                    *w /= self.col_scale[k];
+                }
+            }
+        }
+    }
+
+    /// Takes `z`'s multipliers from the iteration's units back to `ŵ_j` (see
+    /// [`Self::scale_constraints`]).
+    pub(crate) fn unscale_multipliers(&self, z: &mut [f64]) {
+        let (s1, m) = (self.scheme.stages() - 1, self.cons);
+        let nz = s1 * N;
+        for (k, c) in self.col_scale.iter().enumerate() {
+            for j in 0..s1 {
+                if let Some(w) = z.get_mut(nz + j * m + k) {
+                    *w *= c;
+                }
+            }
+        }
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
     /// The constraint terms of the step equations (DESIGN §11, Lobatto schemes: control
     /// point `j` is quadrature node `j`): `−h b_j G(x_j)ᵀ λ_j` in the gradient rows and the
     /// rows `g(x_j)`; with `jac`, their derivatives instead (`−h b_j G(x_j)ᵀ` in the `λ_j`
     /// columns, `−h b_j Σ_r λ_{j,r} ∂²g_r` on the diagonal blocks, `G(x_j)` in the
-    /// constraint rows). The rows are `g` itself, not `g/h`: their round-off (`ε |q|²`)
-    /// then stays within the Newton's round-off floor at any step size.
+    /// constraint rows). The rows are `g` itself, not `g/h`, times the factor of
+    /// [`crate::newton::constraint_scales`]: their round-off (`ε |G| |q|` unscaled) then
+    /// stays within the Newton's round-off floor at any step size and in any units.
     fn constraint_rows(
         &mut self,
         z: &DVector<f64>,
@@ -364,36 +431,41 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
             if !(self.gval.iter().all(|v| v.is_finite()) && gj.iter().all(|v| v.is_finite())) {
                 return Err(NewtonFailure::NonFinite);
             }
-            // The unknowns are `ŵ_j = h² λ_j`, so that every block of the Jacobian is of
-            // order 1/h (a step of any size keeps it well scaled): `h b_j λ_j = (b_j/h) ŵ_j`.
+            // The unknowns are `ŵ_j = h² λ_j` (over `col_scale` in the iteration), so that
+            // every block of the Jacobian is of order 1/h (a step of any size keeps it well
+            // scaled): `h b_j λ_j = (b_j/h) ŵ_j`.
             let hb = sch.b()[j] / h;
             match jac.as_deref_mut() {
                 None => {
                     let rs = r.as_mut_slice();
                     if j >= 1 {
-                        for (k, g) in self.gval.iter().enumerate() {
-                            rs[nz + (j - 1) * m + k] = *g;
+                        for (k, (g, f)) in self.gval.iter().zip(&self.row_scale).enumerate() {
+                            rs[nz + (j - 1) * m + k] = f * g;
                         }
                     }
                     if j + 1 < s {
                         let lam = &zs[nz + j * m..nz + (j + 1) * m];
+                        let cs = &self.col_scale;
                         for a in 0..N {
-                            let f: f64 = (0..m).map(|k| gj[(k, a)] * lam[k]).sum();
+                            let f: f64 = (0..m).map(|k| gj[(k, a)] * (cs[k] * lam[k])).sum();
                             rs[j * N + a] -= hb * f;
                         }
                     }
                 }
                 Some(jm) => {
                     if j + 1 < s {
-                        for k in 0..m {
+                        for (k, c) in self.col_scale.iter().enumerate() {
                             for a in 0..N {
-                                jm[(j * N + a, nz + j * m + k)] = -hb * gj[(k, a)];
+                                jm[(j * N + a, nz + j * m + k)] = -hb * c * gj[(k, a)];
                             }
                         }
                         if j >= 1 {
-                            let lam = &zs[nz + j * m..nz + (j + 1) * m];
+                            let u = &zs[nz + j * m..nz + (j + 1) * m];
+                            for ((l, c), x) in self.lam.iter_mut().zip(&self.col_scale).zip(u) {
+                                *l = c * x;
+                            }
                             let curv = crate::model::general::constraint_curvature_at(
-                                self.model, t, &x, lam,
+                                self.model, t, &x, &self.lam,
                             );
                             if !all_finite(&curv) {
                                 return Err(NewtonFailure::NonFinite);
@@ -406,9 +478,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
                         }
                     }
                     if j >= 1 {
-                        for k in 0..m {
+                        for (k, f) in self.row_scale.iter().enumerate() {
                             for a in 0..N {
-                                jm[(nz + (j - 1) * m + k, (j - 1) * N + a)] = gj[(k, a)];
+                                jm[(nz + (j - 1) * m + k, (j - 1) * N + a)] = f * gj[(k, a)];
                             }
                         }
                     }

@@ -75,6 +75,9 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 cons,
                 gval: vec![0.0; cons],
                 gjac: vec![DMatrix::zeros(cons, N); s],
+                row_scale: vec![1.0; cons],
+                col_scale: vec![1.0; cons],
+                lam: vec![0.0; cons],
                 blocks_given: false,
                 noise: 0.0,
                 noise_h: 0.0,
@@ -378,7 +381,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         if !(carry || across) {
             self.newton.invalidate();
         }
+        let constrained = M::CONSTRAINED && prob.cons > 0;
+        if constrained {
+            prob.scale_constraints(scale, self.z.as_mut_slice());
+        }
         let solved = self.newton.solve(prob, &mut self.z, scale);
+        if constrained {
+            self.prob.unscale_multipliers(self.z.as_mut_slice());
+        }
         self.prob.blocks_given = false;
         if M::CONSTRAINED && self.prob.cons > 0 {
             self.end_constrained(solved)
