@@ -1736,6 +1736,87 @@ fn trust_constrained_models_solve_the_same_in_any_units() {
     }
 }
 
+#[forced_lagrangian(
+    coordinates(x),
+    lagrangian = 0.5 * m * x_dot * x_dot - 0.5 * k * x * x,
+    force(x = -c * x_dot + f0 * (w * t).sin()),
+)]
+struct UnitsOscillator {
+    m: f64,
+    k: f64,
+    c: f64,
+    f0: f64,
+    w: f64,
+}
+
+/// The automatic first step does not depend on the units: an oscillator whose mass is a
+/// large number (m = k = 1e3 to 6e24, released from rest) and a driven one from rest at the
+/// origin with its time in nanoseconds (T = 2e10) run `Ok` within the tolerance. Before,
+/// the first step was chosen in momenta, which carry the unit of mass that the absolute
+/// tolerance does not (m = 1e15: a first step of 5e-16, `StepSizeTooSmall` at t = 0), and
+/// fell back to an absolute 1e-6 where the initial data gave nothing to go on (below the
+/// clock's resolution 16 ε T of a run in nanoseconds).
+#[test]
+fn trust_the_first_step_is_chosen_in_any_units() {
+    let (z, tf) = (0.05f64, 10.0);
+    let wd = (1.0 - z * z).sqrt();
+    let exact = (-z * tf).exp() * ((wd * tf).cos() + z / wd * (wd * tf).sin());
+    for m in [1e3, 1e9, 1e15, 6e24] {
+        let model = UnitsOscillator {
+            m,
+            k: m,
+            c: 2.0 * z * m,
+            f0: 0.0,
+            w: 0.0,
+        };
+        let init = InitialState::from_velocity([1.0], [0.0]);
+        for (s, tol) in [(3, 1e-6), (5, 1e-10)] {
+            let end = Integrator::adaptive(&model, Scheme::lobatto(s).unwrap(), tol, tol)
+                .unwrap()
+                .final_state(init, tf)
+                .unwrap_or_else(|f| panic!("m = {m:e}, lobatto{s} at {tol:e}: {}", f.error));
+            let err = (end.q[0] - exact).abs();
+            assert!(
+                err < 10.0 * tol,
+                "m = {m:e}, lobatto{s} at {tol:e}: {err:.2e}"
+            );
+        }
+    }
+    // The driven oscillator over 20 s, in seconds and in nanoseconds.
+    let ts = 1e-9;
+    let seconds = UnitsOscillator {
+        m: 1.0,
+        k: 1.0,
+        c: 0.1,
+        f0: 1.0,
+        w: 1.3,
+    };
+    let ns = UnitsOscillator {
+        m: 1.0,
+        k: ts * ts,
+        c: 0.1 * ts,
+        f0: ts * ts,
+        w: 1.3 * ts,
+    };
+    let init = InitialState::from_velocity([0.0], [0.0]);
+    let reference = Integrator::new(&seconds, Scheme::lobatto(5).unwrap(), 1e-3)
+        .unwrap()
+        .final_state(init, 20.0)
+        .unwrap()
+        .q[0];
+    for (model, tf) in [(&seconds, 20.0), (&ns, 20.0 / ts)] {
+        for s in [3, 5] {
+            let tol = 1e-8;
+            let end = Integrator::adaptive(model, Scheme::lobatto(s).unwrap(), tol, tol)
+                .unwrap()
+                .final_state(init, tf)
+                .unwrap_or_else(|f| panic!("T = {tf:e}, lobatto{s}: {}", f.error));
+            let err = (end.q[0] - reference).abs();
+            assert!(err < 10.0 * tol, "T = {tf:e}, lobatto{s}: {err:.2e}");
+        }
+    }
+}
+
 /// `L = ½v² − ½x² + e ln(x + ½)` with `e = 0`: its value is NaN past `x = −½`, its
 /// derivatives are finite (zero times a finite number).
 struct NanValue {

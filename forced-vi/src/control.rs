@@ -425,9 +425,13 @@
 //! interpolant's order.
 //!
 //! **The first step** ([`crate::Integrator::adaptive`]): Hairer, Nørsett & Wanner's
-//! algorithm (*Solving ODEs I*, II.4) on `y = (q, p)`, `f = (v, L_q + F)`:
-//! `h₀ = 0.01 ‖y₀‖ / ‖f₀‖`, one explicit Euler step of `h₀` for `‖f'‖`, and
-//! `h = min(100 h₀, (0.01 / max(‖f₀‖, ‖f'‖))^{1/(p+1)})`, within the step bounds.
+//! algorithm (*Solving ODEs I*, II.4) on `y = (q, v)`, `f = (v, a)`, with the acceleration
+//! `a = E⁻¹ (L_q + F)`: `h₀ = 0.01 ‖y₀‖ / ‖f₀‖` (`10⁻⁶ T` where either norm is below
+//! 1e-5), one explicit Euler step of `h₀` for `‖f'‖`, and
+//! `h = min(100 h₀, (0.01 / max(‖f₀‖, ‖f'‖))^{1/(p+1)})`, within the step bounds. In
+//! velocities, not momenta, and relative to the run's length `T`, not to a time of 1: the
+//! first step then does not depend on the units of mass and time (see
+//! `Stepper::choose_first_step`).
 
 use crate::error::Error;
 

@@ -305,9 +305,20 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// The first step of an adaptive run, from the initial data (Hairer, Nørsett & Wanner,
-    /// *Solving ODEs I*, II.4): with `y = (q, p)` and `f = (v, L_q + F)` in the weighted
-    /// norm, `h₀ = 0.01 ‖y‖ / ‖f‖`, an Euler step of `h₀` to estimate `‖f'‖`, and
-    /// `h = min(100 h₀, (0.01 / max(‖f‖, ‖f'‖))^{1/(p+1)})`, within the step bounds.
+    /// *Solving ODEs I*, II.4), in positions and velocities: with `y = (q, v)` and
+    /// `f = (v, a)` (`a` the acceleration) in the weighted norm, `h₀ = 0.01 ‖y‖ / ‖f‖`, an
+    /// Euler step of `h₀` to estimate `‖f'‖`, and
+    /// `h = min(100 h₀, (0.01 / max(‖f‖, ‖f'‖))^{1/(p+1)})`, within the step bounds; where
+    /// `‖y‖` or `‖f‖` is below 1e-5, `h₀ = 1e-6 T` (`T` the run's length).
+    ///
+    /// In velocities, not momenta: a momentum carries the unit of mass, which the one
+    /// absolute tolerance does not (it weighs a position and its momentum alike), so a model
+    /// whose masses are large numbers read a large `‖ṗ‖ / atol` and took a tiny `h₀`. An
+    /// oscillator with `m = k = 1e15` released from rest, and the Earth around the Sun in SI
+    /// units, ended in `StepSizeTooSmall` at `t = 0` (first steps of 5e-16 and 4e-14); the
+    /// velocities and accelerations do not depend on the unit of mass. And relative to `T`,
+    /// not 1e-6 itself: a run in nanoseconds (`T = 2e10`) from rest at the origin was
+    /// refused with a first step of 1e-6, below the clock's resolution `16 ε T`.
     pub(super) fn choose_first_step(&mut self) -> Result<(), Error> {
         let Some(tol) = self.tolerance else {
             return Ok(());
@@ -341,24 +352,33 @@ fn first_step(
     p: f64,
 ) -> Result<f64, Error> {
     let n = st.v.len();
-    let (q0, p0, v0) = (&st.q.sum, &st.p.sum, &st.v);
+    let (q0, p0, v0) = (&st.q.sum[..], &st.p.sum[..], &st.v[..]);
     let w = |i: usize, y: f64| atol[i] + rtol[i] * y.abs();
     // A zero over a zero weight (a pure relative tolerance on a value at zero) weighs
     // nothing; a value other than zero over one is infinite, and the step starts small.
     let ratio = |x: f64, w: f64| if x == 0.0 { 0.0 } else { x / w };
     let rms = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
         let sum: f64 = (0..n)
-            .map(|i| ratio(a(i), w(i, q0[i])).powi(2) + ratio(b(i), w(i, p0[i])).powi(2))
+            .map(|i| ratio(a(i), w(i, q0[i])).powi(2) + ratio(b(i), w(i, v0[i])).powi(2))
             .sum();
         (sum / (2 * n).max(1) as f64).sqrt()
     };
+    let cap = span.min(max_step);
+    // Where the heuristic has nothing to go on (at rest at the origin, or no force).
+    let fallback = 1e-6 * span;
     let (mut fq0, mut lv) = (vec![0.0; n], vec![0.0; n]);
     backend.gradient((0.0, q0, v0), &mut fq0, &mut lv)?;
-    let d0 = rms(&|i| q0[i], &|i| p0[i]);
-    let d1 = rms(&|i| v0[i], &|i| fq0[i]);
-    let cap = span.min(max_step);
+    // The acceleration `E⁻¹ (L_q + F)`, from the velocity of a small change of momentum
+    // along `L_q + F` (exact for a Lagrangian quadratic in `v`): a model whose velocity
+    // solve fails there starts from the fallback, and the controller goes on from it.
+    let mut a0 = vec![0.0; n];
+    if acceleration(backend, (0.0, q0, p0, v0), &fq0, fallback, &mut a0).is_err() {
+        return bounded(fallback, (cap, min_step), span);
+    }
+    let d0 = rms(&|i| q0[i], &|i| v0[i]);
+    let d1 = rms(&|i| v0[i], &|i| a0[i]);
     let h0 = if d0 < 1e-5 || d1 < 1e-5 || !d1.is_finite() {
-        1e-6
+        fallback
     } else {
         0.01 * d0 / d1
     }
@@ -366,17 +386,18 @@ fn first_step(
     // One explicit Euler step of h₀: the derivative's rate of change.
     let q1: Vec<f64> = (0..n).map(|i| q0[i] + h0 * v0[i]).collect();
     let p1: Vec<f64> = (0..n).map(|i| p0[i] + h0 * fq0[i]).collect();
-    let mut v1 = v0.clone();
-    let mut fq1 = vec![0.0; n];
+    let mut v1: Vec<f64> = (0..n).map(|i| v0[i] + h0 * a0[i]).collect();
+    let (mut fq1, mut a1) = (vec![0.0; n], vec![0.0; n]);
     let probe = backend
         .velocity((h0, &q1, &p1), &mut v1, 0)
-        .and_then(|()| backend.gradient((h0, &q1, &v1), &mut fq1, &mut lv));
+        .and_then(|()| backend.gradient((h0, &q1, &v1), &mut fq1, &mut lv))
+        .and_then(|()| acceleration(backend, (h0, &q1, &p1, &v1), &fq1, fallback, &mut a1));
     let h = match probe {
         Ok(()) => {
-            let d2 = rms(&|i| v1[i] - v0[i], &|i| fq1[i] - fq0[i]) / h0;
+            let d2 = rms(&|i| v1[i] - v0[i], &|i| a1[i] - a0[i]) / h0;
             let dmax = d1.max(d2);
             let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
-                (h0 * 1e-3).max(1e-6)
+                (h0 * 1e-3).max(fallback)
             } else {
                 (0.01 / dmax).powf(1.0 / (p + 1.0))
             };
@@ -384,13 +405,38 @@ fn first_step(
         }
         // The probe left the model's domain: start from h₀ and let the controller go on.
         Err(_) => h0,
-    }
-    .min(cap)
-    .max(min_step);
+    };
+    bounded(h, (cap, min_step), span)
+}
+
+/// `h` within `[min_step, cap]`; a step that is not finite or below the clock's resolution
+/// over `span` is a typed error.
+fn bounded(h: f64, (cap, min_step): (f64, f64), span: f64) -> Result<f64, Error> {
+    let h = h.min(cap).max(min_step);
     if !(h.is_finite() && h > 16.0 * f64::EPSILON * span) {
         return Err(Error::StepSizeTooSmall { t: 0.0, h });
     }
     Ok(h)
+}
+
+/// The acceleration `E⁻¹ f` at `(t, q)` with momentum `p` and velocity `v` there, `f` the
+/// rate of the momentum (`L_q + F`), into `a`: the change of velocity that a change
+/// `δ f` of the momentum makes, over `δ`, with `δ = fallback` (a time, small next to the
+/// run's length).
+fn acceleration(
+    backend: &mut dyn StepBackend,
+    (t, q, p, v): (f64, &[f64], &[f64], &[f64]),
+    f: &[f64],
+    delta: f64,
+    a: &mut [f64],
+) -> Result<(), Error> {
+    let moved: Vec<f64> = p.iter().zip(f).map(|(p, f)| p + delta * f).collect();
+    a.copy_from_slice(v);
+    backend.velocity((t, q, &moved), a, 0)?;
+    for (x, v) in a.iter_mut().zip(v) {
+        *x = (*x - v) / delta;
+    }
+    Ok(())
 }
 
 /// Lifts the step polynomial of the step in `from` to the control points of the reference
