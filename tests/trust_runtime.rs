@@ -1817,6 +1817,46 @@ fn trust_the_first_step_is_chosen_in_any_units() {
     }
 }
 
+#[forced_lagrangian(
+    coordinates(y),
+    lagrangian = 0.5 * y_dot * y_dot - 0.5 * y * y - 0.25 * b * y * y * y * y / (l * l),
+    force(y = -c * y_dot),
+)]
+struct LengthDuffing {
+    b: f64,
+    c: f64,
+    l: f64,
+}
+
+/// A model whose lengths are small numbers (a Duffing oscillator in units of 1e-8 to 1e-14
+/// of its amplitude) takes the same steps, to round-off, as in units of 1. Before, the
+/// Newton's absolute tolerance (1e-15 on the increments) decided its solves once the
+/// increments were below about 1e-3, and most stopped after one iteration: lobatto3 at
+/// h = 0.02 in units of 1e-11 ended 9.4e-9 off (relative) the run in units of 1.
+#[test]
+fn trust_fixed_steps_do_not_depend_on_the_unit_of_length() {
+    let run = |l: f64, s: usize, h: f64| {
+        let model = LengthDuffing { b: 5.0, c: 0.01, l };
+        let init = InitialState::from_velocity([l], [0.0]);
+        let end = Integrator::new(&model, Scheme::lobatto(s).unwrap(), h)
+            .unwrap()
+            .final_state(init, 50.0)
+            .unwrap();
+        (end.q[0] / l, end.v[0] / l, end.stats.newton_iterations)
+    };
+    for (s, h) in [(3, 0.02), (4, 0.1), (6, 0.25)] {
+        let one = run(1.0, s, h);
+        for l in [1e-8, 1e-11, 1e-14] {
+            let x = run(l, s, h);
+            let d = (x.0 - one.0).abs().max((x.1 - one.1).abs());
+            assert!(
+                d < 1e-12,
+                "lobatto{s} h {h}, l = {l:e}: {x:?} against {one:?} (off {d:.1e})"
+            );
+        }
+    }
+}
+
 /// `L = ½v² − ½x² + e ln(x + ½)` with `e = 0`: its value is NaN past `x = −½`, its
 /// derivatives are finite (zero times a finite number).
 struct NanValue {
