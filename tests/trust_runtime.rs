@@ -1857,6 +1857,64 @@ fn trust_fixed_steps_do_not_depend_on_the_unit_of_length() {
     }
 }
 
+#[forced_lagrangian(
+    coordinates(x, th),
+    lagrangian = 0.5 * (mc + m) * x_dot * x_dot + m * l * x_dot * th_dot * th.cos()
+        + 0.5 * m * l * l * th_dot * th_dot + m * g * l * th.cos(),
+    force(x = -cx * x_dot, th = -ct * th_dot),
+)]
+struct HeavyCart {
+    mc: f64,
+    m: f64,
+    l: f64,
+    g: f64,
+    cx: f64,
+    ct: f64,
+}
+
+/// The velocity solve (`L_v(q, v) = p`) holds each coordinate to its own terms: a 1 kg, 1 m
+/// pendulum on a cart of 1e9 kg gets its angular velocity as exactly as on a cart of 1 kg.
+/// Before, the test was against the largest row's terms (the cart's momentum, 1e9): the
+/// pendulum's row was accepted 2e-4 off, and fixed lobatto5 at h = 0.125 ended with the
+/// angular velocity 4.9e-5 off (its angle 1e-9), on either backend.
+#[test]
+fn trust_a_light_coordinate_beside_a_heavy_one_gets_its_velocity() {
+    let init = InitialState::from_velocity([0.0, 1.0], [1.0, 0.0]);
+    for path in [LinearPath::Dense, LinearPath::Sparse] {
+        for mc in [1.0, 1e9] {
+            let model = HeavyCart {
+                mc,
+                m: 1.0,
+                l: 1.0,
+                g: 9.81,
+                cx: 0.01 * mc,
+                ct: 0.05,
+            };
+            let run = |s: usize, h: f64| {
+                Integrator::new(&model, Scheme::lobatto(s).unwrap(), h)
+                    .unwrap()
+                    .linear_path(path)
+                    .final_state(init, 10.0)
+                    .unwrap()
+            };
+            let (reference, end) = (run(6, 5e-4), run(5, 0.125));
+            let (eq, ev) = (
+                (end.q[1] - reference.q[1]).abs(),
+                (end.v[1] - reference.v[1]).abs(),
+            );
+            // lobatto5's own error at this step: 2e-7 in the angle, 3e-6 in its velocity on
+            // the light cart, 1e-9 and 5e-9 on the heavy one.
+            assert!(
+                eq < 1e-6 && ev < 1e-5,
+                "{path:?}, cart {mc:e}: {eq:.1e} {ev:.1e}"
+            );
+            if mc > 1.0 {
+                assert!(ev < 1e-7, "{path:?}, cart {mc:e}: velocity {ev:.1e} off");
+            }
+        }
+    }
+}
+
 /// `L = ½v² − ½x² + e ln(x + ½)` with `e = 0`: its value is NaN past `x = −½`, its
 /// derivatives are finite (zero times a finite number).
 struct NanValue {
