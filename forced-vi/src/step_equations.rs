@@ -47,6 +47,12 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     /// `h |A| |x|` at the last Jacobian ([`NonlinearSystem::residual_noise`]), and that `h`.
     pub(crate) noise: f64,
     pub(crate) noise_h: f64,
+    /// The same per coordinate: `h max_i Σ_b |A_i|_ab |x_i|_b` over the nodes `i`.
+    pub(crate) noise_rows: Vec<f64>,
+    /// The residual's scale for this solve: the whole step's (the constraint rows'), and
+    /// each coordinate's (its gradient rows'; [`crate::backend::coordinate_scales`]).
+    pub(crate) scale: f64,
+    pub(crate) coord_scale: Vec<f64>,
     /// The unknowns `xs` and `vs` were last computed from, while `nodes_valid` (cleared
     /// when `h`, `t0` or `q0` change): a Jacobian at the point of the last residual, as
     /// Newton asks for, takes the node values as they are.
@@ -81,6 +87,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
             blocks_given,
             noise,
             noise_h,
+            noise_rows,
+            scale,
+            coord_scale,
             nodes_z,
             nodes_valid,
         } = self;
@@ -103,6 +112,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
         *blocks_given = false;
         *noise = 0.0;
         *noise_h = 0.0;
+        noise_rows.fill(0.0);
+        *scale = 0.0;
+        coord_scale.fill(0.0);
         nodes_z.clear();
         *nodes_valid = false;
     }
@@ -288,6 +300,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 .chain([self.q0.as_slice()]),
         );
         self.noise_h = h;
+        self.noise_rows.fill(0.0);
+        for (nj, x) in self.jacs.iter().zip(&self.xs) {
+            // In place: an `N × N` temporary would sit on the stack.
+            for (a, m) in self.noise_rows.iter_mut().enumerate().take(N) {
+                let row: f64 = (0..N).map(|b| nj.a[(a, b)].abs() * x[b].abs()).sum();
+                *m = m.max(h * row);
+            }
+        }
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {
@@ -336,6 +356,59 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
 
     fn residual_noise(&self) -> f64 {
         self.noise
+    }
+
+    /// A constrained model's rows share one floor (see the sparse step's `rows_apart`).
+    fn rows_apart(&self) -> bool {
+        self.cons == 0
+    }
+
+    /// The rows of one coordinate (at every control point) form a group.
+    fn group_max(&self, out: &mut [f64]) {
+        let nz = (self.scheme.stages() - 1) * N;
+        let len = nz.min(out.len());
+        let grad = &mut out[..len];
+        for a in 0..N {
+            let largest = grad
+                .iter()
+                .skip(a)
+                .step_by(N)
+                .fold(0.0f64, |m, x| m.max(*x));
+            grad.iter_mut()
+                .skip(a)
+                .step_by(N)
+                .for_each(|x| *x = largest);
+        }
+    }
+
+    /// Each coordinate's gradient rows get its own scale, the constraint rows the step's
+    /// (a constrained model: every row the step's).
+    fn row_scales(&self, scale: f64, out: &mut [f64]) {
+        if self.cons > 0 {
+            out.fill(scale);
+            return;
+        }
+        let nz = (self.scheme.stages() - 1) * N;
+        let (grad, cons) = out.split_at_mut(nz.min(out.len()));
+        for (x, c) in grad.iter_mut().zip(self.coord_scale.iter().cycle()) {
+            *x = *c;
+        }
+        cons.fill(self.scale);
+    }
+
+    /// Each coordinate's gradient rows get its own forces' round-off, the constraint rows
+    /// the largest.
+    fn add_row_noise(&self, out: &mut [f64]) {
+        if self.cons > 0 {
+            out.iter_mut().for_each(|x| *x += self.noise);
+            return;
+        }
+        let nz = (self.scheme.stages() - 1) * N;
+        let (grad, cons) = out.split_at_mut(nz.min(out.len()));
+        for (x, n) in grad.iter_mut().zip(self.noise_rows.iter().cycle()) {
+            *x += n;
+        }
+        cons.iter_mut().for_each(|x| *x += self.noise);
     }
 
     /// A linear model's step equations (`STRUCTURE.linear`), without constraints: the

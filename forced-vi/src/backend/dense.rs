@@ -45,6 +45,9 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
     rate: Vec<f64>,
     /// The next solve starts from the last one's factors ([`StepBackend::carry_factors`]).
     carry: bool,
+    /// Scratch for the step problem's per-row noise while a tangent's Jacobian is made
+    /// (see [`StepBackend::linearize`]).
+    noise_keep: Vec<f64>,
     /// A solve of the same step size as the last may start from its factors
     /// ([`StepBackend::factors_across_steps`]).
     across_steps: bool,
@@ -81,6 +84,9 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 blocks_given: false,
                 noise: 0.0,
                 noise_h: 0.0,
+                noise_rows: vec![0.0; N],
+                scale: 0.0,
+                coord_scale: vec![0.0; N],
                 nodes_z: Vec::with_capacity(dim),
                 nodes_valid: false,
             },
@@ -93,6 +99,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
             adjoint: None,
             tangent: None,
             carry: false,
+            noise_keep: vec![0.0; N],
             across_steps: false,
         }
     }
@@ -114,6 +121,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> DenseBackend<'_, M, N> {
             mu,
             rate,
             carry,
+            noise_keep: _,
             across_steps: _,
         } = self;
         prob.restart();
@@ -353,10 +361,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         h: f64,
         t0: f64,
         (q0, p0): (&[f64], &[f64]),
-        scale: f64,
+        (scale, force): (f64, &[f64]),
     ) -> Result<NewtonReport, StepFailure> {
         let prob = &mut self.prob;
         prob.nodes_valid = false;
+        prob.scale = scale;
+        super::coordinate_scales(h, (p0, force), &mut prob.coord_scale);
         let same_h = (prob.h - h).abs() <= SAME_STEP * h.abs();
         prob.h = h;
         prob.t0 = t0;
@@ -499,10 +509,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     fn linearize(&mut self) -> Result<(), StepFailure> {
         let (dim, opts) = (self.z.len(), *self.newton.options());
-        self.tangent
+        // The tangent's Jacobian leaves the noise of the step's own (the next step's
+        // Newton floors count it), so that a run with tangents takes the same steps.
+        let prob = &mut self.prob;
+        let noise = (prob.noise, prob.noise_h);
+        std::mem::swap(&mut prob.noise_rows, &mut self.noise_keep);
+        let made = self
+            .tangent
             .get_or_insert_with(|| Newton::new(dim, opts))
-            .factor_at(&mut self.prob, &self.z)
-            .map_err(StepFailure::Newton)
+            .factor_at(prob, &self.z)
+            .map_err(StepFailure::Newton);
+        std::mem::swap(&mut prob.noise_rows, &mut self.noise_keep);
+        (prob.noise, prob.noise_h) = noise;
+        made
     }
 
     fn apply_node(&self, i: usize, (dx, dv): (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {

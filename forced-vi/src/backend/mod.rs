@@ -137,14 +137,17 @@ pub(crate) trait StepBackend {
     /// The unknowns, to write.
     fn z_mut(&mut self) -> &mut [f64];
     /// Solves the step equations of a step of size `h` from `(t0, q0, p0)`, starting from
-    /// the guess in [`Self::z`]; `scale` sets the residual's units. On success, the node
-    /// values ([`Self::node_fq`], …) belong to the solution.
+    /// the guess in [`Self::z`]; `scale = (global, force)` sets the residual's units: the
+    /// momentum scale of the whole step, and per coordinate the size of `L_q + F` at the
+    /// last step's nodes, from which each coordinate's rows get their own (see
+    /// [`coordinate_scales`]). On success, the node values ([`Self::node_fq`], …) belong to
+    /// the solution.
     fn solve(
         &mut self,
         h: f64,
         t0: f64,
         start: (&[f64], &[f64]),
-        scale: f64,
+        scale: (f64, &[f64]),
     ) -> Result<NewtonReport, StepFailure>;
     /// Linear solves of the last [`Self::solve`], converged or not.
     fn last_iterations(&self) -> usize;
@@ -281,6 +284,20 @@ const fn dense_frame_is_large<const N: usize>() -> bool {
         > 64 * 1024
 }
 
+/// Each coordinate's momentum scale for a step of size `h` from momenta `p0`, with `force`
+/// the size of its `L_q + F` at the last step's nodes: `max(|p0_a|, h |F_a|)` into `out`
+/// (its gradient rows' [`crate::NonlinearSystem::row_scales`]). A coordinate's rows are
+/// then tested against their own terms, not the largest coordinate's: a Duffing oscillator
+/// beside a mass of 1e9 moving at unit speed (fixed lobatto4, h = 0.1) ended 5.9e-11 off
+/// the oscillator alone with the one scale `max_a |p0_a|`, and the sparse path 3.5e-7.
+/// Where `force` is shorter than `p0` (not yet measured), the momenta alone.
+pub(crate) fn coordinate_scales(h: f64, (p0, force): (&[f64], &[f64]), out: &mut [f64]) {
+    for (a, (o, p)) in out.iter_mut().zip(p0).enumerate() {
+        let f = force.get(a).map_or(0.0, |f| h * f);
+        *o = if f > p.abs() { f } else { p.abs() };
+    }
+}
+
 /// Runs `f` in a frame of its own. A dense call of a large model (its mass matrix, its node
 /// blocks: megabytes at `N` = 1024) inlined into the code shared with the sparse backend
 /// would put those blocks on that code's frame, which the sparse path's stack budget
@@ -383,7 +400,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
         h: f64,
         t0: f64,
         start: (&[f64], &[f64]),
-        scale: f64,
+        scale: (f64, &[f64]),
     ) -> Result<NewtonReport, StepFailure> {
         forward!(self, b => b.solve(h, t0, start, scale))
     }

@@ -200,9 +200,11 @@ impl StepBackend for SparseBackend<'_> {
         h: f64,
         t0: f64,
         (q0, p0): (&[f64], &[f64]),
-        scale: f64,
+        (scale, force): (f64, &[f64]),
     ) -> Result<NewtonReport, StepFailure> {
         let prob = &mut self.prob;
+        prob.scale = scale;
+        super::coordinate_scales(h, (p0, force), &mut prob.coord_scale);
         let same_h = (prob.h - h).abs() <= SAME_STEP * h.abs();
         prob.h = h;
         prob.t0 = t0;

@@ -45,6 +45,40 @@ pub trait NonlinearSystem {
         0.0
     }
 
+    /// The scale `ρ_a` of each residual row `a`, for a solve with `residual_scale` `scale`
+    /// (default: `scale` for every row). Row `a` meets the residual test at
+    /// `|R_a| ≤ residual_tol ρ_a`, and its round-off floor counts `ρ_a` among its terms
+    /// (see [`Newton::solve`]). A system whose rows are in different units, or of very
+    /// different sizes (a step's momenta of a light and a heavy coordinate), gives each its
+    /// own.
+    fn row_scales(&self, scale: f64, out: &mut [f64]) {
+        out.fill(scale);
+    }
+
+    /// Adds each residual row's round-off that does not shrink with `z` to `out` (default:
+    /// [`NonlinearSystem::residual_noise`] to every row).
+    fn add_row_noise(&self, out: &mut [f64]) {
+        let noise = self.residual_noise();
+        out.iter_mut().for_each(|x| *x += noise);
+    }
+
+    /// Whether each row's round-off floor counts its own terms: its scale
+    /// ([`NonlinearSystem::row_scales`]), its noise ([`NonlinearSystem::add_row_noise`])
+    /// and the largest Jacobian entry of its group ([`NonlinearSystem::group_max`]) times
+    /// the largest unknown. Without it (the default), every row's floor counts the largest
+    /// of each: `64 ε (scale + ν + |J| |z|)` of [`Newton::solve`].
+    fn rows_apart(&self) -> bool {
+        false
+    }
+
+    /// With [`NonlinearSystem::rows_apart`]: replaces each row's value in `out` (its largest
+    /// Jacobian entry) by the largest over the rows whose round-off it shares (default: all
+    /// of them).
+    fn group_max(&self, out: &mut [f64]) {
+        let m = out.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        out.fill(m);
+    }
+
     /// The Jacobian is the same at every `z` and in every solve of this system's size (a
     /// linear model's step equations at one step size): factors made for an earlier solve
     /// are then exact, and their first correction is accepted as a fresh one's would be.
@@ -179,12 +213,39 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
         self.lu.solve_in_place(b);
     }
 
-    #[inline(always)]
-    fn residual_noise(sys: &S) -> f64 {
-        sys.residual_noise()
-    }
     fn constant_jacobian(sys: &S) -> bool {
         sys.constant_jacobian()
+    }
+
+    #[inline(always)]
+    fn row_scales(sys: &S, scale: f64, out: &mut [f64]) {
+        sys.row_scales(scale, out)
+    }
+
+    #[inline(always)]
+    fn add_row_noise(sys: &S, out: &mut [f64]) {
+        sys.add_row_noise(out)
+    }
+
+    #[inline(always)]
+    fn rows_apart(sys: &S) -> bool {
+        sys.rows_apart()
+    }
+
+    #[inline(always)]
+    fn group_max(sys: &S, out: &mut [f64]) {
+        sys.group_max(out)
+    }
+
+    #[inline]
+    fn row_max(&self, out: &mut [f64]) {
+        out.fill(0.0);
+        for col in self.jac.column_iter() {
+            for (o, &x) in out.iter_mut().zip(col.iter()) {
+                let a = x.abs();
+                *o = if a > *o { a } else { *o };
+            }
+        }
     }
 }
 

@@ -59,6 +59,12 @@ pub(crate) struct SparseStep<'a> {
     /// `h |A| |x|` at the last Jacobian ([`SparseSystem::residual_noise`]), and that `h`.
     noise: f64,
     noise_h: f64,
+    /// The same per coordinate: `h max_i Σ_b |A_i|_ab |x_i|_b` over the nodes `i`.
+    noise_rows: Vec<f64>,
+    /// The residual's scale for this solve: the whole step's (the constraint rows'), and
+    /// each coordinate's (its gradient rows'; [`crate::backend::coordinate_scales`]).
+    pub(crate) scale: f64,
+    pub(crate) coord_scale: Vec<f64>,
     /// The model promises a constant mass matrix (`E` the same at every node and step, and
     /// `C ≡ 0`): the `E` part of the Jacobian is assembled once, for a unit step, into
     /// `e_part` (on the first Jacobian, `e_built`; the buffer is made with the others, so
@@ -116,6 +122,9 @@ impl<'a> SparseStep<'a> {
             lam,
             noise: 0.0,
             noise_h: 0.0,
+            noise_rows: vec![0.0; n],
+            scale: 0.0,
+            coord_scale: vec![0.0; n],
             e_part: vec![0.0; if constant_mass { values_len } else { 0 }],
             constant_mass,
             e_built: false,
@@ -283,6 +292,25 @@ impl SparseSystem for SparseStep<'_> {
             [self.xs.as_slice(), self.q0.as_slice()],
         );
         self.noise_h = h;
+        self.noise_rows.fill(0.0);
+        let n = self.n;
+        for (blk, x) in self.blocks.iter().zip(self.xs.chunks(n.max(1))) {
+            // Row sums of `|A_i| |x_i|`, each kept as the row's largest over the nodes.
+            let mut row = usize::MAX;
+            let mut sum = 0.0;
+            for (k, (r, c)) in self.pattern.entries().enumerate() {
+                if r != row {
+                    if let Some(m) = self.noise_rows.get_mut(row) {
+                        *m = m.max(h * sum);
+                    }
+                    (row, sum) = (r, 0.0);
+                }
+                sum += blk.a.get(k).map_or(0.0, |a| a.abs()) * x.get(c).map_or(0.0, |x| x.abs());
+            }
+            if let Some(m) = self.noise_rows.get_mut(row) {
+                *m = m.max(h * sum);
+            }
+        }
         let base = &self.step_pattern.base;
         let nnz = self.pattern.nnz();
         if self.constant_mass {
@@ -349,6 +377,56 @@ impl SparseSystem for SparseStep<'_> {
 
     fn residual_noise(&self) -> f64 {
         self.noise
+    }
+
+    /// A constrained model's rows share one floor, the largest: the constraint forces
+    /// `G(x)ᵀ λ` are computed from absolute positions, and their round-off (on a chain,
+    /// `ε |x| / ℓ` relative, with `ℓ` a link's length: 150 ε of the row's linear terms on
+    /// the 256-link chain, lobatto3) is not in the row's own terms.
+    fn rows_apart(&self) -> bool {
+        self.cons.is_none()
+    }
+
+    /// The rows of one coordinate (at every control point, together in this layout)
+    /// form a group.
+    fn group_max(&self, out: &mut [f64]) {
+        let s1 = (self.scheme.stages() - 1).max(1);
+        for rows in out.chunks_mut(s1) {
+            let largest = rows.iter().fold(0.0f64, |m, x| m.max(*x));
+            rows.fill(largest);
+        }
+    }
+
+    /// Each coordinate's gradient rows get its own scale, the constraint rows the step's
+    /// (a constrained model: every row the step's; see [`SparseSystem::rows_apart`]).
+    fn row_scales(&self, scale: f64, out: &mut [f64]) {
+        if self.cons.is_some() {
+            out.fill(scale);
+            return;
+        }
+        let s1 = self.scheme.stages() - 1;
+        let nz = s1 * self.n;
+        let (grad, cons) = out.split_at_mut(nz.min(out.len()));
+        for (rows, c) in grad.chunks_mut(s1).zip(&self.coord_scale) {
+            rows.fill(*c);
+        }
+        cons.fill(self.scale);
+    }
+
+    /// Each coordinate's gradient rows get its own forces' round-off, the constraint rows
+    /// the largest.
+    fn add_row_noise(&self, out: &mut [f64]) {
+        if self.cons.is_some() {
+            out.iter_mut().for_each(|x| *x += self.noise);
+            return;
+        }
+        let s1 = self.scheme.stages() - 1;
+        let nz = s1 * self.n;
+        let (grad, cons) = out.split_at_mut(nz.min(out.len()));
+        for (rows, n) in grad.chunks_mut(s1).zip(&self.noise_rows) {
+            rows.iter_mut().for_each(|x| *x += n);
+        }
+        cons.iter_mut().for_each(|x| *x += self.noise);
     }
 }
 

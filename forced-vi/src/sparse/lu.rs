@@ -193,6 +193,17 @@ impl SparseLu {
         self.values.iter().fold(0.0f64, |m, x| m.max(x.abs()))
     }
 
+    /// `max_b |J_ab|` for each row `a` into `out`, with the current values.
+    pub(crate) fn row_max(&self, out: &mut [f64]) {
+        out.fill(0.0);
+        for (&r, &x) in self.row_idx.iter().zip(&self.values) {
+            if let Some(o) = out.get_mut(r) {
+                let a = x.abs();
+                *o = if a > *o { a } else { *o };
+            }
+        }
+    }
+
     /// Factors the current values (numeric phase only).
     ///
     /// The supernodal factorisation is tried first; when it is declined (a zero pivot, an

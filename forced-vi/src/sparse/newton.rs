@@ -19,6 +19,24 @@ pub(crate) trait SparseSystem {
     fn residual_noise(&self) -> f64 {
         0.0
     }
+    /// As [`crate::NonlinearSystem::row_scales`] (default: `scale` for every row).
+    fn row_scales(&self, scale: f64, out: &mut [f64]) {
+        out.fill(scale);
+    }
+    /// As [`crate::NonlinearSystem::rows_apart`] (default: false).
+    fn rows_apart(&self) -> bool {
+        false
+    }
+    /// As [`crate::NonlinearSystem::group_max`] (default: one group).
+    fn group_max(&self, out: &mut [f64]) {
+        let m = out.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        out.fill(m);
+    }
+    /// As [`crate::NonlinearSystem::add_row_noise`] (default: the noise to every row).
+    fn add_row_noise(&self, out: &mut [f64]) {
+        let noise = self.residual_noise();
+        out.iter_mut().for_each(|x| *x += noise);
+    }
 }
 
 impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
@@ -43,8 +61,28 @@ impl<S: SparseSystem + ?Sized> LinearSolver<S> for SparseLu {
     }
 
     #[inline(always)]
-    fn residual_noise(sys: &S) -> f64 {
-        sys.residual_noise()
+    fn row_scales(sys: &S, scale: f64, out: &mut [f64]) {
+        sys.row_scales(scale, out)
+    }
+
+    #[inline(always)]
+    fn add_row_noise(sys: &S, out: &mut [f64]) {
+        sys.add_row_noise(out)
+    }
+
+    #[inline(always)]
+    fn rows_apart(sys: &S) -> bool {
+        sys.rows_apart()
+    }
+
+    #[inline(always)]
+    fn group_max(sys: &S, out: &mut [f64]) {
+        sys.group_max(out)
+    }
+
+    #[inline]
+    fn row_max(&self, out: &mut [f64]) {
+        SparseLu::row_max(self, out)
     }
 }
 

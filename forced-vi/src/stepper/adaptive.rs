@@ -281,7 +281,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
             let start = (st.t_state, &st.q.sum[..], &st.p.sum[..]);
-            let solve = (h, scale, per_unit);
+            let solve = (h, (scale, &st.force[..]), per_unit);
             match solve_reference(reference, start, solve, (tol, now), &mut self.err, iters)? {
                 Some(true) => break,
                 Some(false) => {}
@@ -489,7 +489,7 @@ fn lift_step<const N: usize>(
 fn solve_reference<const N: usize>(
     reference: &mut dyn StepBackend,
     (t0, q0, p0): (f64, &[f64], &[f64]),
-    (h, scale, per_unit): (f64, f64, f64),
+    (h, scale, per_unit): (f64, (f64, &[f64]), f64),
     (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
     err: &mut (Vec<f64>, Vec<f64>),
     iters: &mut usize,

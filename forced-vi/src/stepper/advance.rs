@@ -19,7 +19,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
         let rep = self
             .backend
-            .solve(h, st.t_state, (&st.q.sum, &st.p.sum), scale)?;
+            .solve(h, st.t_state, (&st.q.sum, &st.p.sum), (scale, &st.force))?;
         // The last residual evaluation was at the accepted iterate, so the node values of
         // the backend belong to the solution.
         let sch = self.scheme;
@@ -59,11 +59,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let z = backend.z();
         let mut fmax = 0.0f64;
         dp.fill(0.0);
+        st.force.fill(0.0);
         for i in 0..r {
             let (hb, fq) = (h * sch.b()[i], backend.node_fq(i));
-            for (d, &f) in dp.iter_mut().zip(fq) {
+            for ((d, &f), fa) in dp.iter_mut().zip(fq).zip(st.force.iter_mut()) {
                 *d += hb * f;
                 fmax = fmax.max(f.abs());
+                *fa = fa.max(f.abs());
             }
         }
         if let Some(imp) = backend.constraint_impulse() {

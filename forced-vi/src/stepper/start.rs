@@ -311,5 +311,8 @@ fn initial_state(
         sign
     };
     state.scale_f = fq.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for (f, x) in state.force.iter_mut().zip(&fq) {
+        *f = x.abs();
+    }
     Ok(sign)
 }

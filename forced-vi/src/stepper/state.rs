@@ -61,6 +61,8 @@ pub(crate) struct State {
     pub(crate) delta_helps: bool,
     /// The largest `|L_q + F|` at a node of the last step: the residual's force scale.
     pub(crate) scale_f: f64,
+    /// The same per coordinate: `|L_q + F|_a` (the largest over the nodes).
+    pub(crate) force: Vec<f64>,
     /// The time of `(q, p)` (ahead of the last record between substeps).
     pub(crate) t_state: f64,
 }
@@ -81,6 +83,7 @@ impl State {
             deltas: 0,
             delta_helps: false,
             scale_f: 0.0,
+            force: vec![0.0; n],
             t_state: 0.0,
         }
     }
@@ -101,6 +104,7 @@ impl State {
             deltas,
             delta_helps,
             scale_f,
+            force,
             t_state,
         } = self;
         for x in [&mut q.sum, &mut q.comp, &mut p.sum, &mut p.comp, v] {
@@ -115,6 +119,7 @@ impl State {
         *deltas = 0;
         *delta_helps = false;
         *scale_f = 0.0;
+        force.fill(0.0);
         *t_state = 0.0;
     }
 
@@ -137,6 +142,7 @@ impl State {
         self.deltas = other.deltas;
         self.delta_helps = other.delta_helps;
         self.scale_f = other.scale_f;
+        self.force.clone_from(&other.force);
         self.t_state = other.t_state;
     }
 
