@@ -107,9 +107,17 @@ pub(crate) struct Iteration<V> {
     /// terms at the current iterate (see [`Iteration::row_sizes`]).
     rho: V,
     sigma: V,
-    /// Each row's largest Jacobian entry, the largest of its group (see
-    /// [`Iteration::row_sizes`]).
+    /// The parts of `sigma` that do not depend on the iterate (`ρ_a + ν_a`) and each row's
+    /// largest Jacobian entry, the largest of its group (see [`Iteration::row_terms`]).
+    base: V,
     jrow: V,
+    /// `jrow` holds the current factors' Jacobian (see [`Iteration::row_terms`]).
+    pub(crate) jrow_valid: bool,
+    /// The rows' Jacobian term in `sigma`: `jrow_weight jrow_a |z|` with rows apart
+    /// (`jrow_weight` 1, or 0 for carried factors' first correction), `jrow_weight |z|`
+    /// otherwise (`jrow_weight` the largest Jacobian entry).
+    rows_apart: bool,
+    jrow_weight: f64,
     dz: V,
     z_trial: V,
     pub(crate) have_factors: bool,
@@ -198,6 +206,10 @@ impl<V: Buffer + Clone> Iteration<V> {
             r: zero.clone(),
             r_trial: zero.clone(),
             rho: zero.clone(),
+            base: zero.clone(),
+            jrow_valid: false,
+            rows_apart: false,
+            jrow_weight: 0.0,
             sigma: zero.clone(),
             jrow: zero.clone(),
             dz: zero.clone(),
@@ -232,7 +244,11 @@ impl<V: Buffer> Iteration<V> {
             r_trial,
             rho,
             sigma,
+            base,
             jrow,
+            jrow_valid,
+            rows_apart,
+            jrow_weight,
             dz,
             z_trial,
             have_factors,
@@ -251,10 +267,13 @@ impl<V: Buffer> Iteration<V> {
             stale_skip,
             stale_backoff,
         } = self;
-        for b in [r, r_trial, rho, sigma, jrow, dz, z_trial] {
+        for b in [r, r_trial, rho, sigma, base, jrow, dz, z_trial] {
             b.entries_mut().fill(0.0);
         }
         *have_factors = false;
+        *jrow_valid = false;
+        *rows_apart = false;
+        *jrow_weight = 0.0;
         *last_iterations = 0;
         *last_step = 0.0;
         *last_at_floor = false;
@@ -413,7 +432,8 @@ impl<V: Buffer> Iteration<V> {
         if stale {
             jac_scale = self.jac_scale;
         }
-        self.row_sizes(lin, sys, z, jac_scale);
+        self.row_terms(lin, sys, jac_scale);
+        self.row_sizes(z);
         let mut rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
         self.carried_error = 0.0;
         self.last_iterations = 0;
@@ -426,6 +446,7 @@ impl<V: Buffer> Iteration<V> {
             it += 1;
             self.last_iterations = it;
             if carried.is_none() && !(o.simplified && self.have_factors) {
+                self.jrow_valid = false;
                 jac_scale = lin.refresh(sys, z)?;
                 self.jac_scale = jac_scale;
                 stale = false;
@@ -433,7 +454,8 @@ impl<V: Buffer> Iteration<V> {
                 refreshed_at = it;
                 self.have_factors = true;
                 self.factors_h = self.step_h;
-                self.row_sizes(lin, sys, z, jac_scale);
+                self.row_terms(lin, sys, jac_scale);
+                self.row_sizes(z);
                 rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
             }
             // Below this level residuals at the current iterate are round-off.
@@ -451,8 +473,9 @@ impl<V: Buffer> Iteration<V> {
                 let reach = ends.fold(0.0f64, |m, (x, d)| m.max((x + d).abs()));
                 let grown = reach - max_norm(z.entries());
                 if grown > 0.0 {
+                    let jg = self.jrow_weight * grown;
                     for (x, j) in self.sigma.entries_mut().iter_mut().zip(self.jrow.entries()) {
-                        *x += j * grown;
+                        *x += j * jg;
                     }
                     rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
                 }
@@ -526,7 +549,7 @@ impl<V: Buffer> Iteration<V> {
             self.last_step = step;
             let znorm = max_norm(z.entries());
             // The rows' sizes at the new iterate (the weights of the next line search).
-            self.row_sizes(lin, sys, z, jac_scale);
+            self.row_sizes(z);
             rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
             let floor = ROW_FLOOR;
             // A residual at the round-off floor cannot be reduced further: the iterate is as
@@ -640,13 +663,7 @@ impl<V: Buffer> Iteration<V> {
     /// `Σ_b |J_ab| |z_b|`, the sum of the row's linear terms), the stiff van der Pol at
     /// μ = 1e6 (adaptive lobatto8, tol 1e-9) took over 300 000 steps instead of 88 713:
     /// the rows of one coordinate share the round-off of its node values.
-    fn row_sizes<S: ?Sized, L: LinearSolver<S, Vector = V>>(
-        &mut self,
-        lin: &L,
-        sys: &S,
-        z: &V,
-        jac_scale: f64,
-    ) {
+    fn row_sizes(&mut self, z: &V) {
         const Z_RESOLVED: f64 = f64::MIN_POSITIVE / f64::EPSILON;
         let znorm = max_norm(z.entries());
         let zr = if znorm < Z_RESOLVED {
@@ -654,25 +671,54 @@ impl<V: Buffer> Iteration<V> {
         } else {
             znorm
         };
-        let (sigma, jrow) = (self.sigma.entries_mut(), self.jrow.entries_mut());
-        sigma.fill(0.0);
-        L::add_row_noise(sys, sigma);
-        if L::rows_apart(sys) {
-            // `jac_scale` is 0 until this solve has factors of its own or takes stale ones
-            // (carried factors' first correction is judged without the Jacobian's term).
-            if jac_scale > 0.0 {
+        let sigma = self.sigma.entries_mut();
+        let base = self.base.entries();
+        if self.rows_apart {
+            let jz = self.jrow_weight * zr;
+            for (x, (b, j)) in sigma.iter_mut().zip(base.iter().zip(self.jrow.entries())) {
+                *x = b + j * jz;
+            }
+        } else {
+            let jz = self.jrow_weight * zr;
+            for (x, b) in sigma.iter_mut().zip(base) {
+                *x = b + jz;
+            }
+        }
+    }
+
+    /// The terms of [`Iteration::row_sizes`] that change only with the system's scales, its
+    /// noise and its Jacobian: `ρ_a + ν_a` into `base`, `|J|_a` into `jrow` (0 while
+    /// `jac_scale` is: carried factors' first correction is judged without it). Made at a
+    /// solve's start and after each refresh of the factors, not at every iterate (on the
+    /// damped oscillator, adaptive lobatto5, the per-iterate scan of the Jacobian was a
+    /// tenth of the run).
+    fn row_terms<S: ?Sized, L: LinearSolver<S, Vector = V>>(
+        &mut self,
+        lin: &L,
+        sys: &S,
+        jac_scale: f64,
+    ) {
+        let base = self.base.entries_mut();
+        base.fill(0.0);
+        L::add_row_noise(sys, base);
+        self.rows_apart = L::rows_apart(sys);
+        if self.rows_apart {
+            // The Jacobian's rows are scanned once per set of factors.
+            if jac_scale > 0.0 && !self.jrow_valid {
+                let jrow = self.jrow.entries_mut();
                 lin.row_max(jrow);
                 L::group_max(sys, jrow);
-            } else {
-                jrow.fill(0.0);
+                self.jrow_valid = true;
             }
-            for ((x, r), j) in sigma.iter_mut().zip(self.rho.entries()).zip(jrow.iter()) {
-                *x += r + j * zr;
+            self.jrow_weight = if jac_scale > 0.0 { 1.0 } else { 0.0 };
+            for (x, r) in base.iter_mut().zip(self.rho.entries()) {
+                *x += r;
             }
         } else {
             // One size for every row: the largest scale, noise and `|J| |z|`.
-            let one = max_norm(self.rho.entries()) + max_norm(sigma) + jac_scale * zr;
-            sigma.fill(one);
+            let one = max_norm(self.rho.entries()) + max_norm(base);
+            base.fill(one);
+            self.jrow_weight = jac_scale;
         }
     }
 

@@ -240,8 +240,11 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
     #[inline]
     fn row_max(&self, out: &mut [f64]) {
         out.fill(0.0);
-        for col in self.jac.column_iter() {
-            for (o, &x) in out.iter_mut().zip(col.iter()) {
+        // By slices of the column-major storage (nalgebra's column iterator cost four times
+        // as many instructions).
+        let rows = self.jac.nrows().max(1);
+        for col in self.jac.as_slice().chunks_exact(rows) {
+            for (o, &x) in out.iter_mut().zip(col) {
                 let a = x.abs();
                 *o = if a > *o { a } else { *o };
             }
@@ -286,6 +289,7 @@ impl Newton {
     /// Forgets reusable Jacobian factors (call when the problem changes).
     pub fn invalidate(&mut self) {
         self.iteration.have_factors = false;
+        self.iteration.jrow_valid = false;
     }
 
     /// Evaluates and factors the Jacobian of `sys` at `z` (for the tangent of a solution,
@@ -296,6 +300,7 @@ impl Newton {
         z: &DVector<f64>,
     ) -> Result<(), NewtonFailure> {
         self.iteration.have_factors = false;
+        self.iteration.jrow_valid = false;
         let sys: &mut dyn NonlinearSystem = sys;
         LinearSolver::<dyn NonlinearSystem>::refresh(&mut self.linear, sys, z).map(|_| ())
     }

@@ -118,6 +118,7 @@ impl SparseNewton {
     /// Forgets the factors.
     pub(crate) fn invalidate(&mut self) {
         self.iteration.have_factors = false;
+        self.iteration.jrow_valid = false;
     }
 
     /// Linear solves done by the last call to [`SparseNewton::solve`].
@@ -132,6 +133,7 @@ impl SparseNewton {
         z: &Vec<f64>,
     ) -> Result<(), NewtonFailure> {
         self.iteration.have_factors = false;
+        self.iteration.jrow_valid = false;
         LinearSolver::<S>::refresh(&mut self.lu, sys, z).map(|_| ())
     }
 
