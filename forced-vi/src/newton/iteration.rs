@@ -433,8 +433,7 @@ impl<V: Buffer> Iteration<V> {
             jac_scale = self.jac_scale;
         }
         self.row_terms(lin, sys, jac_scale);
-        self.row_sizes(z);
-        let mut rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
+        let mut rnorm = self.row_sizes(z);
         self.carried_error = 0.0;
         self.last_iterations = 0;
         // The iteration whose factors were made at its start (0: none in this solve), and
@@ -455,8 +454,7 @@ impl<V: Buffer> Iteration<V> {
                 self.have_factors = true;
                 self.factors_h = self.step_h;
                 self.row_terms(lin, sys, jac_scale);
-                self.row_sizes(z);
-                rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
+                rnorm = self.row_sizes(z);
             }
             // Below this level residuals at the current iterate are round-off.
             let res_floor = ROW_FLOOR;
@@ -470,8 +468,10 @@ impl<V: Buffer> Iteration<V> {
             // its own would otherwise weigh its first nonzero residual as a growth).
             if L::rows_apart(sys) {
                 let ends = z.entries().iter().zip(self.dz.entries());
-                let reach = ends.fold(0.0f64, |m, (x, d)| m.max((x + d).abs()));
-                let grown = reach - max_norm(z.entries());
+                let (reach, now) = ends.fold((0.0f64, 0.0f64), |(m, n), (x, d)| {
+                    (m.max((x + d).abs()), n.max(x.abs()))
+                });
+                let grown = reach - now;
                 if grown > 0.0 {
                     let jg = self.jrow_weight * grown;
                     for (x, j) in self.sigma.entries_mut().iter_mut().zip(self.jrow.entries()) {
@@ -549,8 +549,7 @@ impl<V: Buffer> Iteration<V> {
             self.last_step = step;
             let znorm = max_norm(z.entries());
             // The rows' sizes at the new iterate (the weights of the next line search).
-            self.row_sizes(z);
-            rnorm = weighted_norm(self.r.entries(), self.sigma.entries());
+            rnorm = self.row_sizes_at(znorm);
             let floor = ROW_FLOOR;
             // A residual at the round-off floor cannot be reduced further: the iterate is as
             // exact as the problem's conditioning allows, even if the increments are noise.
@@ -561,12 +560,13 @@ impl<V: Buffer> Iteration<V> {
             self.last_at_floor = rnorm <= floor;
             let at_floor = rnorm <= if it > 1 { floor } else { floor / 16.0 };
             let small_error = error_estimate(it, step, theta) <= o.rtol * znorm + o.atol;
+            // Made only where it decides (a weighted norm per iterate otherwise).
             let small_residual =
-                weighted_norm(self.r.entries(), self.rho.entries()) <= o.residual_tol;
+                || weighted_norm(self.r.entries(), self.rho.entries()) <= o.residual_tol;
             // After a far start the second iterate is accepted by the error test alone
             // (its contraction measured), not for a residual at the floor.
             let polished = !(far_start && it < 3)
-                || (it == 2 && small_error && small_residual && halvings == 0);
+                || (it == 2 && small_error && halvings == 0 && small_residual());
             // Factors of an earlier solve of a system whose Jacobian does not change (a
             // linear model at one step size) are exact: their iterates are judged as fresh
             // ones'.
@@ -574,7 +574,7 @@ impl<V: Buffer> Iteration<V> {
             let accepted = if (stale && !exact) || relaxed {
                 it > 1 && halvings == 0 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
             } else {
-                ((small_error && small_residual && halvings == 0) || at_floor) && polished
+                ((small_error && halvings == 0 && small_residual()) || at_floor) && polished
             };
             if accepted {
                 if began_stale {
@@ -663,27 +663,43 @@ impl<V: Buffer> Iteration<V> {
     /// `Σ_b |J_ab| |z_b|`, the sum of the row's linear terms), the stiff van der Pol at
     /// μ = 1e6 (adaptive lobatto8, tol 1e-9) took over 300 000 steps instead of 88 713:
     /// the rows of one coordinate share the round-off of its node values.
-    fn row_sizes(&mut self, z: &V) {
+    fn row_sizes(&mut self, z: &V) -> f64 {
+        self.row_sizes_at(max_norm(z.entries()))
+    }
+
+    /// [`Iteration::row_sizes`] with `znorm = |z|` already known; returns the residual's
+    /// weighted norm `max_a |R_a| / σ_a` (NaN propagated), made in the same pass.
+    fn row_sizes_at(&mut self, znorm: f64) -> f64 {
         const Z_RESOLVED: f64 = f64::MIN_POSITIVE / f64::EPSILON;
-        let znorm = max_norm(z.entries());
         let zr = if znorm < Z_RESOLVED {
             Z_RESOLVED
         } else {
             znorm
         };
-        let sigma = self.sigma.entries_mut();
-        let base = self.base.entries();
+        let jz = self.jrow_weight * zr;
+        let (sigma, base, r) = (
+            self.sigma.entries_mut(),
+            self.base.entries(),
+            self.r.entries(),
+        );
+        let (mut m, mut nan) = (0.0f64, false);
         if self.rows_apart {
-            let jz = self.jrow_weight * zr;
-            for (x, (b, j)) in sigma.iter_mut().zip(base.iter().zip(self.jrow.entries())) {
+            let terms = base.iter().zip(self.jrow.entries()).zip(r);
+            for (x, ((b, j), v)) in sigma.iter_mut().zip(terms) {
                 *x = b + j * jz;
+                let a = v.abs() / *x;
+                m = if a > m { a } else { m };
+                nan |= a.is_nan();
             }
         } else {
-            let jz = self.jrow_weight * zr;
-            for (x, b) in sigma.iter_mut().zip(base) {
+            for (x, (b, v)) in sigma.iter_mut().zip(base.iter().zip(r)) {
                 *x = b + jz;
+                let a = v.abs() / *x;
+                m = if a > m { a } else { m };
+                nan |= a.is_nan();
             }
         }
+        if nan { f64::NAN } else { m }
     }
 
     /// The terms of [`Iteration::row_sizes`] that change only with the system's scales, its
