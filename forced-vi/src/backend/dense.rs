@@ -419,6 +419,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         self.carry
     }
 
+    fn solve_within(&mut self, bound: f64) {
+        if self.prob.cons == 0 {
+            self.newton.iteration.solve_within(bound);
+        }
+    }
+
     fn carried_error(&self) -> f64 {
         self.newton.iteration.carried_error()
     }

@@ -156,6 +156,11 @@ pub(crate) trait StepBackend {
     /// whether it will. Without it, every solve of the estimate makes fresh factors. The
     /// carried factors' second correction is left out where it is at most `negligible`.
     fn carry_factors(&mut self, h: f64, negligible: f64) -> bool;
+    /// Lets the next [`Self::solve`] (only) stop once its iterate's estimated error is at
+    /// most `bound` (max-norm, in the unknowns), not at round-off: an adaptive step, whose
+    /// error estimate measures the step as solved. Ignored on a constrained model, whose
+    /// constraint rows are solved to round-off.
+    fn solve_within(&mut self, bound: f64);
     /// After a solve with carried factors: a bound (max-norm) on the error they left in
     /// [`Self::z`]; zero after any other solve.
     fn carried_error(&self) -> f64;
@@ -411,6 +416,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn carry_factors(&mut self, h: f64, negligible: f64) -> bool {
         forward!(self, b => b.carry_factors(h, negligible))
+    }
+    #[inline(always)]
+    fn solve_within(&mut self, bound: f64) {
+        forward!(self, b => b.solve_within(bound))
     }
     #[inline(always)]
     fn carried_error(&self) -> f64 {

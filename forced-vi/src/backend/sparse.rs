@@ -252,6 +252,12 @@ impl StepBackend for SparseBackend<'_> {
         self.carry
     }
 
+    fn solve_within(&mut self, bound: f64) {
+        if self.saddle.is_none() {
+            self.newton.iteration.solve_within(bound);
+        }
+    }
+
     fn carried_error(&self) -> f64 {
         self.newton.iteration.carried_error()
     }

@@ -144,6 +144,9 @@ pub(crate) struct Iteration<V> {
     /// A second correction of carried factors at most this large is not applied (see
     /// [`Iteration::carry_factors`]).
     negligible: f64,
+    /// For the next solve only: an iterate whose estimated error (max-norm, from a measured
+    /// contraction) is at most this is accepted (see [`Iteration::solve_within`]); 0: off.
+    within: f64,
     /// The largest entry of the Jacobian at the last refresh.
     jac_scale: f64,
     /// Solves left that make fresh factors before those of an earlier solve are tried
@@ -226,6 +229,7 @@ impl<V: Buffer + Clone> Iteration<V> {
             costly_factors: false,
             carried_error: 0.0,
             negligible: 0.0,
+            within: 0.0,
             jac_scale: 0.0,
             stale_skip: 0,
             stale_backoff: 0,
@@ -263,6 +267,7 @@ impl<V: Buffer> Iteration<V> {
             costly_factors: _,
             carried_error,
             negligible,
+            within,
             jac_scale,
             stale_skip,
             stale_backoff,
@@ -284,6 +289,7 @@ impl<V: Buffer> Iteration<V> {
         *carry_backoff = 0;
         *carried_error = 0.0;
         *negligible = 0.0;
+        *within = 0.0;
         *jac_scale = 0.0;
         *stale_skip = 0;
         *stale_backoff = 0;
@@ -357,6 +363,20 @@ impl<V: Buffer> Iteration<V> {
         self.have_factors = false;
     }
 
+    /// Lets the next solve (only) stop at the first iterate whose estimated error, `δ θ /
+    /// (1 − θ)` from the last correction `δ` and a measured contraction `θ` (from the
+    /// second iteration on, with no halving), is at most `bound` (max-norm, in the
+    /// unknowns), instead of at round-off. For the steps of an adaptive run, whose error
+    /// estimate measures the step as solved, Newton's error included (see
+    /// [`crate::control`], "Newton's stop").
+    pub(crate) fn solve_within(&mut self, bound: f64) {
+        self.within = if bound.is_finite() && bound > 0.0 {
+            bound
+        } else {
+            0.0
+        };
+    }
+
     /// Where factors cost far more than what a failed attempt to carry them wastes (a
     /// residual and a solve: a large sparse model, whose LU is most of a step), the solve
     /// after a failure makes fresh factors and the next one carries those again, with no
@@ -376,6 +396,7 @@ impl<V: Buffer> Iteration<V> {
         residual_scale: f64,
     ) -> Result<NewtonReport, NewtonFailure> {
         let o = self.opts;
+        let within = std::mem::take(&mut self.within);
         let scale = residual_scale.max(f64::MIN_POSITIVE);
         // Each row is tested against its own terms (see `row_sizes`): `rnorm` is the
         // largest `|R_a| / σ_a`, and the residual test is `|R_a| ≤ residual_tol ρ_a`.
@@ -440,6 +461,8 @@ impl<V: Buffer> Iteration<V> {
         // whether the factors in use were kept past a contraction measured against another
         // set's correction (see below): their iterates are then judged as stale ones'.
         let (mut refreshed_at, mut relaxed) = (0, false);
+        // The next correction, already in `dz` (see the first iterate's test below).
+        let mut ahead: Option<f64> = None;
         let mut it = 0;
         while it < o.max_iterations {
             it += 1;
@@ -455,10 +478,14 @@ impl<V: Buffer> Iteration<V> {
                 self.factors_h = self.step_h;
                 self.row_terms(lin, sys, jac_scale);
                 rnorm = self.row_sizes(z);
+                ahead = None;
             }
             // Below this level residuals at the current iterate are round-off.
             let res_floor = ROW_FLOOR;
-            let mut full = self.direction(lin)?;
+            let mut full = match ahead.take() {
+                Some(full) => full,
+                None => self.direction(lin)?,
+            };
             if let Some(ratio) = carried {
                 self.dz.entries_mut().iter_mut().for_each(|x| *x *= ratio);
                 full *= ratio;
@@ -571,11 +598,32 @@ impl<V: Buffer> Iteration<V> {
             // linear model at one step size) are exact: their iterates are judged as fresh
             // ones'.
             let exact = stale && L::constant_jacobian(sys);
-            let accepted = if (stale && !exact) || relaxed {
-                it > 1 && halvings == 0 && error_estimate(it, step, theta) <= f64::EPSILON * znorm
-            } else {
-                ((small_error && halvings == 0 && small_residual()) || at_floor) && polished
-            };
+            // Within the caller's bound (an adaptive step's share of its tolerance).
+            let close = within > 0.0
+                && it > 1
+                && halvings == 0
+                && error_estimate(it, step, theta) <= within;
+            let accepted = close
+                || if (stale && !exact) || relaxed {
+                    it > 1
+                        && halvings == 0
+                        && error_estimate(it, step, theta) <= f64::EPSILON * znorm
+                } else {
+                    ((small_error && halvings == 0 && small_residual()) || at_floor) && polished
+                };
+            // The first iterate, whose contraction is not measured yet: accepted within the
+            // bound where the correction that would follow (with the same factors, from the
+            // residual just evaluated; kept for the next iteration otherwise) is at most half
+            // of it and the residual contracted tenfold, so that those factors are good to
+            // about 10 % and that correction is the iterate's error to about that.
+            let accepted = accepted
+                || if within > 0.0 && it == 1 && halvings == 0 && contraction <= 0.1 {
+                    let next = self.direction(lin)?;
+                    ahead = Some(next);
+                    next <= 0.5 * within
+                } else {
+                    false
+                };
             if accepted {
                 if began_stale {
                     self.stale_outcome(stale && it <= 2);

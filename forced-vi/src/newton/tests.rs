@@ -324,3 +324,31 @@ fn a_negligible_second_correction_of_carried_factors_is_left_out() {
     );
     assert!(bound < 0.1 * second, "bound {bound:e}, second {second:e}");
 }
+
+#[test]
+fn a_solve_within_a_bound_stops_early_and_meets_it() {
+    // The solution to round-off, and the iterations it takes.
+    let mut exact = DVector::from_vec(vec![2.0, 0.0]);
+    let full = Newton::new(2, NewtonOptions::default())
+        .solve(&mut Cubic, &mut exact, 1.0)
+        .unwrap();
+    for bound in [1e-3, 1e-6, 1e-9] {
+        let mut n = Newton::new(2, NewtonOptions::default());
+        n.iteration.solve_within(bound);
+        let mut z = DVector::from_vec(vec![2.0, 0.0]);
+        let rep = n.solve(&mut Cubic, &mut z, 1.0).unwrap();
+        let err = (&z - &exact).amax();
+        assert!(err <= bound, "bound {bound:e}: error {err:e}");
+        // Newton's quadratic convergence leaves the tightest bound no iteration to save.
+        assert!(
+            rep.iterations < full.iterations || (bound < 1e-6 && rep.iterations == full.iterations),
+            "bound {bound:e}: {} iterations, {} to round-off",
+            rep.iterations,
+            full.iterations
+        );
+        // For that solve only: the next one goes to round-off again.
+        let mut z = DVector::from_vec(vec![2.0, 0.0]);
+        let again = n.solve(&mut Cubic, &mut z, 1.0).unwrap();
+        assert!((&z - &exact).amax() < 5e-12, "{again:?}");
+    }
+}

@@ -42,6 +42,10 @@ pub(super) struct Pace {
 /// carried factors (see [`crate::control`]).
 const NEGLIGIBLE: f64 = 0.01;
 
+/// The share of a step's tolerance, as an error in every unknown, at which its Newton
+/// iteration may stop (see [`crate::control`], "Newton's stop").
+const NEWTON_SHARE: f64 = 0.01;
+
 /// The round-off bound of a run, in units of the tolerance, from which a step in a band
 /// (see [`crate::control`], "The band") keeps its size even after a reading below the
 /// estimate's resolution (see `Stepper::step_adaptive`).
@@ -123,6 +127,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             // Per unit step: the local errors of a run add up to about `tol`.
             let per_unit = span / h;
+            // Solved to a small share of the step's tolerance and of the last step's
+            // estimate, not to round-off: the estimate measures the step as solved (see
+            // `crate::control`, "Newton's stop").
+            let saved = (&self.saved.q.sum[..], &self.saved.p.sum[..]);
+            let share = NEWTON_SHARE * self.err_last.min(1.0);
+            let within = tol.uniform_error(per_unit, share, saved);
+            self.backend.solve_within(within);
             let solved = self.attempt(h, &mut iters).and_then(|res| {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
                 Ok((res, err))
@@ -158,6 +169,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.round_off_sq = round_off;
                         self.unresolved = unresolved;
                         self.estimate = err / per_unit;
+                        self.err_last = err;
                         let chosen = self.controller;
                         self.h_next = self.controller.accept(h, err, self.resolution);
                         if landing.is_some() && h < planned {

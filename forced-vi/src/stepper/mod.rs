@@ -222,6 +222,10 @@ pub struct Stepper<'a, M, const N: usize> {
     pace: adaptive::Pace,
     /// The last accepted step's [`StepRecord::error_estimate`].
     estimate: f64,
+    /// The last accepted step's estimate per unit step, in the tolerance's norm (0 before
+    /// the first): it bounds the next step's Newton error (see `crate::control`, "Newton's
+    /// stop").
+    err_last: f64,
     /// Adaptive runs of a model whose factors cost most of a step, or a linear model's (see
     /// [`crate::control`]'s step-size bands): a step that the controller would resize by a
     /// factor within the band (`crate::control::BAND` or `LINEAR_BAND`) keeps its size, and

@@ -148,6 +148,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             h_next: h.min(options.max_step),
             pace: Default::default(),
             estimate: 0.0,
+            err_last: 0.0,
             band,
             lean: false,
             tangent: None,
@@ -213,6 +214,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             h_next,
             pace,
             estimate,
+            err_last,
             band: _,
             lean,
             tangent,
@@ -251,6 +253,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         *h_next = h.min(options.max_step);
         *pace = Default::default();
         *estimate = 0.0;
+        *err_last = 0.0;
         *lean = false;
         *tangent = None;
         *tape = None;
