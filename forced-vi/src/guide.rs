@@ -543,7 +543,11 @@
 //! - **each step solves its discrete Euler–Lagrange equations**: Newton stops only when the
 //!   residual meets its bound ([`NewtonOptions`]: a relative residual tolerance, or the
 //!   round-off floor of the terms that cancel in it) and the estimated error of the iterate
-//!   is within `rtol · |z| + atol`; [`StepRecord::residual`] is the residual it stopped at;
+//!   is within `rtol · |z| + atol`; [`StepRecord::residual`] is the residual it stopped at.
+//!   With tolerances, an unconstrained model's step may instead stop once the iterate's
+//!   estimated error is a hundredth of the last accepted step's error estimate: the
+//!   estimate measures the step as solved, Newton's error included (see
+//!   [`crate::control`], "Newton's stop");
 //! - **the velocities solve `L_v(q, v) = p`** to `1e-13 (|p| + |E| |v|)` or to round-off;
 //! - **no step ends at, or crosses, a singular mass matrix**: every step end has a
 //!   well-conditioned mass matrix whose determinant keeps the sign it had at the start;
