@@ -1,6 +1,8 @@
 //! The adaptive rows of the stability section (issue 11): outcomes against the tolerance,
 //! every run, and the stiff cost against the BDF and ESDIRK baselines.
 
+use std::fmt::Write as _;
+
 use super::problem::Case;
 use forced_vi::SchemeId;
 
@@ -216,21 +218,22 @@ pub fn retime(adaptive: &[Row], baselines: &[BaselineRow], cases: &[&dyn Case]) 
 
 /// One error target of the stiff-cost comparison: the cheapest adaptive variational run and
 /// the cheapest run of each stiff baseline reaching it, with their times.
-struct StiffCost<'a> {
-    target: f64,
-    variational: Option<(&'a Row, f64)>,
-    baselines: [Option<(&'a BaselineRow, f64)>; 2],
+pub(super) struct StiffCost<'a> {
+    pub(super) target: f64,
+    /// The run and its time.
+    pub(super) variational: Option<(&'a Row, f64)>,
+    /// Each of [`STIFF_SOLVERS`]' cheapest run and its time.
+    pub(super) baselines: [Option<(&'a BaselineRow, f64)>; 2],
 }
 
-/// Wall time of the best adaptive variational run over the best stiff baselines' at equal
-/// final error, on stiff van der Pol (μ = 10³, T = 2000): the candidates timed again by
-/// `retime`, or the sweeps' own times where they could not be.
-pub fn stiff_cost(s: &Summary) -> String {
-    let scene = STIFF_COST_SCENE;
+/// The lines of the stiff-cost comparison: for each target of [`STIFF_TARGETS`] that an
+/// adaptive run reaches, the cheapest such run and the cheapest run of each stiff baseline
+/// (times from `retime`, or the sweeps' own where they could not be taken again).
+pub(super) fn stiff_lines(s: &Summary) -> Vec<StiffCost<'_>> {
     let t = &s.stiff_times;
     let retimed = t.failure.is_none() && !t.adaptive.is_empty();
     let best = |cands: Vec<(usize, f64)>| cands.into_iter().min_by(|a, b| a.1.total_cmp(&b.1));
-    let lines: Vec<StiffCost> = STIFF_TARGETS
+    STIFF_TARGETS
         .into_iter()
         .map(|target| {
             let v: Vec<(usize, f64)> = if retimed {
@@ -267,7 +270,17 @@ pub fn stiff_cost(s: &Summary) -> String {
             }
         })
         .filter(|c| c.variational.is_some())
-        .collect();
+        .collect()
+}
+
+/// Wall time of the best adaptive variational run over the best stiff baselines' at equal
+/// final error, on stiff van der Pol (μ = 10³, T = 2000): the candidates timed again by
+/// `retime`, or the sweeps' own times where they could not be.
+pub fn stiff_cost(s: &Summary) -> String {
+    let scene = STIFF_COST_SCENE;
+    let t = &s.stiff_times;
+    let retimed = t.failure.is_none() && !t.adaptive.is_empty();
+    let lines = stiff_lines(s);
     if lines.is_empty() {
         return String::new();
     }
@@ -339,26 +352,86 @@ pub fn stiff_cost(s: &Summary) -> String {
             col("ratio to esdirk34", move |c: &StiffCost| ratio(c, 1)),
         ],
     ));
-    md.push_str(
+    md.push_str(&limits(s, &lines));
+    md
+}
+
+/// What limits the stiff cost, with this run's figures: the rejections of the cheapest run
+/// to the first target, the accuracy of the runs at tol 1e-1, and the ladders' tops.
+fn limits(s: &Summary, lines: &[StiffCost]) -> String {
+    let mut md = String::from(
         "\nWhat limits it, read from the table rather than assumed: the time ratio is the \
          ratio of step counts times the ratio of cost per step. The `steps` columns give the \
          first; each attempt of the variational run, accepted or `rejected`, is one step solve \
          of an s-stage Galerkin system with Newton and one Newton iteration of the (s+1)-stage \
          reference scheme for the estimate, against one BDF step (which typically reuses its \
-         Jacobian). The rejections come where the fast mode turns (after the start and before \
-         each relaxation jump), in two patterns (traced on lobatto4). At tol 1, near t = 794 a \
-         step of 14.7 fails its Newton solve and the estimate then grows as the step shrinks, \
-         from 8.6 at h = 3.7 to 1.2e2 at h = 0.09: 8 rejections before a step of 9.0e-3 is \
-         accepted, since the controller, which assumes err ∝ h^p, backs off one rejection at \
-         a time. At tol 3e-1, on the approach to the first jump, each accepted step is \
-         followed by a rejected attempt of about its size whose estimate is 10 to 300 times \
-         larger: the error grows along the solution faster than any step-to-step prediction \
-         follows. The adaptive runs are far more accurate than their tolerance (tol 1e-1 ends \
-         8.7e-8 off): the steps are set by the same estimate, the local error of the \
-         propagated solution, larger than the global error left after the dissipative fast \
-         mode damps it (at tol 1e-1 every scheme ended between 1.2e-8 and 2.9e-6 off). So the \
-         adaptive ladder starts at tol 1 and the baselines' at 1e-1: the cheapest run to 1e-3 \
-         is then lobatto4 at tol 3e-1 (1.0e-5 off).\n\n",
+         Jacobian).",
     );
+    if let Some((c, r)) = lines
+        .first()
+        .and_then(|c| c.variational.map(|(r, _)| (c, r)))
+    {
+        let attempts = r.steps_done + r.rejected_steps;
+        let _ = write!(
+            md,
+            " The cheapest run to {:.0e} rejected {} of its {attempts} attempts. Rejections \
+             come where the solution's time scale changes fastest (the turns of the fast mode, \
+             after the start and before each relaxation jump), where the controller's \
+             prediction, which assumes an error proportional to h^p from one step to the \
+             next, does not hold.",
+            c.target, r.rejected_steps
+        );
+    }
+    let at = 1e-1;
+    let loose: Vec<&Row> = s
+        .adaptive
+        .iter()
+        .filter(|r| {
+            r.scene == STIFF_COST_SCENE
+                && r.tol == Some(at)
+                && !matches!(r.outcome, Outcome::Failed(_))
+        })
+        .collect();
+    let lo = loose
+        .iter()
+        .map(|r| r.err_final)
+        .fold(f64::INFINITY, f64::min);
+    let hi = loose.iter().map(|r| r.err_final).fold(0.0, f64::max);
+    if !loose.is_empty() {
+        let _ = write!(
+            md,
+            " The adaptive runs are far more accurate than their tolerance: at tol {at:.0e} \
+             the {} schemes that finished ended between {lo:.1e} and {hi:.1e} off. The steps \
+             are set by the local error of the propagated solution, which is larger than the \
+             global error left after the dissipative fast mode damps it.",
+            loose.len()
+        );
+    }
+    let top = |xs: &mut dyn Iterator<Item = f64>| xs.fold(f64::NAN, f64::max);
+    let (ta, tb) = (
+        top(&mut s.adaptive.iter().filter_map(|r| r.tol)),
+        top(&mut s.baselines.iter().map(|r| r.tol)),
+    );
+    if ta.is_finite() && tb.is_finite() {
+        let _ = write!(
+            md,
+            " The adaptive ladder starts at tol {ta:.0e} and the baselines' at {tb:.0e}"
+        );
+        if let Some((c, r)) = lines
+            .first()
+            .and_then(|c| c.variational.map(|(r, _)| (c, r)))
+        {
+            let _ = write!(
+                md,
+                ": the cheapest run to {:.0e} is `{}` at tol {:.0e} ({:.1e} off)",
+                c.target,
+                r.method,
+                r.tol.unwrap_or(f64::NAN),
+                r.err_final
+            );
+        }
+        md.push('.');
+    }
+    md.push_str("\n\n");
     md
 }

@@ -47,6 +47,7 @@ use crate::report::{readme, Command, Method, Options, ReportError};
 
 mod adaptive_section;
 mod problem;
+mod remarks;
 pub mod rows;
 mod scenes;
 mod section;

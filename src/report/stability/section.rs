@@ -40,7 +40,7 @@ pub fn markdown_section(s: &Summary, planned: &[&Planned], quick: bool) -> Strin
     md.push_str(&stiff_cost(s));
     md.push_str(&against_baselines(s, planned, &cases));
     md.push_str(&baseline_failures(s));
-    md.push_str(NOTES);
+    md.push_str(&super::remarks::remarks(s, &cases, &TARGETS));
     md.push('\n');
     md
 }
@@ -306,58 +306,3 @@ fn baseline_failures(s: &Summary) -> String {
     md.push('\n');
     md
 }
-
-/// Fixed remarks for the section, written from the full run's numbers (2026-11 run; the
-/// tables above are regenerated, these words are not).
-const NOTES: &str = "### Remarks (from the full run)\n\n\
-- **The Lobatto schemes are only conditionally stable on stiff oscillations.** With Lobatto \
-quadrature the Galerkin schemes are of partitioned Lobatto IIIA–IIIB type (lobatto2 is \
-Störmer–Verlet), so on the stiff chain lobatto2 and lobatto3 blow up for hω from about 3 to \
-100 (`failed:overflow`; lobatto3 at hω ≈ 3 `failed:non_finite_model`), at hω ≈ 300 finish \
-`ok` with |q| ≈ 10²⁸, and at hω ≈ 1000 finish their single step `ok` but wrong (|q| ≈ \
-2·10³ from 0.02). The midpoint rule stays bounded at \
-every hω, and at hω ≈ 30 it reaches an error of 1e-2 about 30 to 40 times faster than BDF. \
-For errors of 1e-4 and below on the chain, lobatto4 with fixed steps takes 0.4 to 0.6 times \
-BDF's time (two runs), and ESDIRK34 does not reach 1e-8. None of these schemes is L-stable: \
-they do not damp what they do not resolve.\n\
-- **Relaxation jumps need adaptive steps.** On `stiff_van_der_pol` (μ = 10³) no fixed step \
-gets through the first jump with h ≥ 0.2, even with 64 substeps; from h = 0.1 down to about \
-2e-3 the runs finish (mostly after subdivision) but the jump lands at the wrong time and the \
-final error is O(1) (`wrong` above). Accurate fixed-step results need h ≤ 5e-4 (4·10⁶ steps \
-and more), thousands of times BDF's cost. Adaptive steps close that gap (Stiff cost above, \
-timed again): lobatto4 at tol 3e-1 takes 184 steps and ends 1.0e-5 off, 1.9 times BDF's time \
-to an error of 1e-3 (1.87 to 1.93 in five runs); at tol 1e-1 it takes 224 steps and ends \
-8.7e-8 off, the same time as BDF to 1e-5 and less than half of it to 1e-7; lobatto6 at tol \
-1e-2 ends below 1e-8, which neither baseline reaches at any tolerance it accepts.\n\
-- **Hairer's scaled form with μ = 10⁶ takes adaptive lobatto5 and above, or lobatto4 at \
-loose tolerances.** With fixed \
-steps no variational run finishes with a useful answer: lobatto2 finishes every run with an \
-error of 0.16 to 16 in x (whose amplitude is 2); lobatto3, lobatto4 and the midpoint rule \
-stop with `newton_max_iterations` at the first relaxation jump (from h = 0.2 down, their \
-steps done times h is about 0.8, the jump's τ), where even 64 substeps are 10⁶ to 10¹⁰ times \
-the jump's time scale (about 1/μ in t): these Newton solves do not converge (final residuals \
-from 0.1 to 1e23, checked at h = 0.1 to 1e-4). Adaptive lobatto2, lobatto3 and the midpoint \
-rule end in `step_size_too_small` (or the Newton failure of their last attempt) at every \
-tolerance, and lobatto4 from tol 1e-1 down: error control per \
-unit step (see Adaptive runs) gives a step of size h the budget tol·h/T of the local error, \
-with T = 2·10⁶ in t, and lobatto4's steps shrink at the jump to the floor 16ε·t (traced at \
-tol 1e-1: 3035 steps, the last of 7·10⁻⁹ at t = 806852.8); at tol 3e-1 and 1 it finishes \
-`Ok` (7499 and 6830 steps). The higher orders pass the jump with larger steps (lobatto6 at \
-tol 1e-1: none below 1.2·10⁻⁷) and finish `Ok`: lobatto6 and lobatto8 at every tolerance \
-from 1 to 1e-8 (352 to 24861 and 315 to 7278 steps), lobatto7 from 1 to 1e-6 and lobatto5 \
-from 1 to 1e-4, all of these \
-runs 6e-14 to 5.7e-9 off the reference (scipy Radau at 3e-11 on the \
-scaled form, which Radau at 1e-10 matches to 2.5e-14). Below those tolerances lobatto5 and \
-lobatto7 end at this report's cap of 10⁶ steps (`max_steps_reached`; lobatto5 at 1e-8, run \
-without the cap, ends `Ok` after 3.2·10⁸ steps, 330 s), and lobatto5 at 1e-5 in \
-`step_size_too_small`. BDF succeeds at tol ≤ 1e-5 and ESDIRK34 only at tol ≤ 1e-8; \
-lobatto6 reaches an error of 1e-6 in 0.6 to 0.9 times BDF's time (four runs) and 1e-8, which \
-neither reaches.\n\
-- **Mildly stiff problems are a draw.** On the over-damped oscillator (ζ = 100, hλ up to 200) \
-and on the coupled van der Pol with amplitudes ×100 every run is `ok` at every h from 1 to \
-5e-5, and the cheapest run to a given error is within a factor of about 4 of the stiff \
-baselines either way; these runs take microseconds to milliseconds, so timing noise matters.\n\
-- **`ok` is not `accurate`.** The runtime sees finite values and a converged Newton solve; \
-it cannot see a run that is stable but wrong. The `wrong` column and `err_final` do. Where the \
-midpoint rule finishes, its energy balance stays at 5e-6 or below even when the trajectory \
-is wrong, so a small energy-balance error is no evidence of accuracy either.";

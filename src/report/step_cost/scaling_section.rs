@@ -23,8 +23,8 @@ pub fn markdown_section(s: &Summary, plot: Option<&str>) -> String {
          hand-written: `forced_vi_scenes::large` (sparse kernels by hand). lobatto2 and \
          lobatto3 at h = 0.01, full diagnostics, medians of interleaved repeats, each run of \
          about 0.5 s timed from its first step's record to its last (the one-off setup of a \
-         run, which a small model's thousands of steps amortise, is left out: at n = 4096 a \
-         run has only tens of steps). `dense`: N × N node blocks and a dense LU of the \
+         run, which a small model's thousands of steps amortise, is left out: the larger the \
+         model, the fewer steps fit in a run). `dense`: N × N node blocks and a dense LU of the \
          (s−1)n unknowns; `sparse`: the node pattern recorded once, the step Jacobian \
          assembled on its pattern (coordinate-major) and factored by faer's sparse LU \
          (symbolic analysis once per run), the factors carried across steps while simplified \

@@ -1,0 +1,360 @@
+//! The remarks that close the stability section. Every figure in them is this run's,
+//! formatted from its rows: a remark written once by hand, with the figures of the run it
+//! was written from, went stale as the integrator changed (a stiff-cost ratio of 1.9 quoted
+//! beside a regenerated table of 3.0), so the words here only say what the rows show.
+
+use std::fmt::Write as _;
+
+use super::problem::Case;
+use super::rows::{BaselineRow, Outcome, Row, Summary};
+use super::tally::{best_baseline, best_variational, is_wrong};
+use crate::baselines::Baseline;
+use crate::report::table::fmt_e;
+
+/// The scenes the remarks speak of (names in [`super::scenes::SCENES`]).
+const RELAXATION: &str = "stiff_van_der_pol";
+const SCALED: &str = "van_der_pol_scaled_1e6";
+const CHAIN: &str = "stiff_spring_chain";
+const MILD: [&str; 2] = ["overdamped_oscillator", "coupled_van_der_pol_x100"];
+
+/// A value in at most two significant digits, plainly where it is of moderate size.
+fn sig(x: f64) -> String {
+    let a = x.abs();
+    if !x.is_finite() {
+        return "—".into();
+    }
+    if a != 0.0 && !(1e-2..1e4).contains(&a) {
+        return format!("{x:.1e}");
+    }
+    let decimals = if a == 0.0 {
+        0
+    } else {
+        (1 - a.log10().floor() as i32).max(0) as usize
+    };
+    let s = format!("{x:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// `a to b`, or `a` where the two are equal as printed.
+fn span(a: String, b: String) -> String {
+    if a == b {
+        a
+    } else {
+        format!("{a} to {b}")
+    }
+}
+
+/// The smallest and largest of some values (`None` if there are none).
+fn extent(xs: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    xs.fold(None, |m, x| match m {
+        None => Some((x, x)),
+        Some((lo, hi)) => Some((lo.min(x), hi.max(x))),
+    })
+}
+
+/// How a run ended, as the tables above write it (`wrong`: off by more than half the
+/// solution's size).
+fn label(r: &Row, scale: f64) -> String {
+    let wrong = if is_wrong(r, scale) { " (wrong)" } else { "" };
+    match &r.outcome {
+        Outcome::Failed(kind) => format!("`failed:{kind}`"),
+        other => format!("`{other}`{wrong}"),
+    }
+}
+
+/// One scheme's runs, in the order given (by step or tolerance, `x` of each row under the
+/// name `what`), as the stretches of equal outcome: `ok at h 1 to 0.1 (errors 1e-3 to
+/// 1e-6), failed:overflow at h 0.05`; with the steps taken where `steps` is set.
+fn stretches(
+    rows: &[&Row],
+    scale: f64,
+    what: &str,
+    x: impl Fn(&Row) -> f64,
+    steps: bool,
+) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < rows.len() {
+        let l = label(rows[i], scale);
+        let mut j = i + 1;
+        while j < rows.len() && label(rows[j], scale) == l {
+            j += 1;
+        }
+        let group = &rows[i..j];
+        let fmt = |v: f64| {
+            if what == "tol" {
+                format!("{v:.0e}")
+            } else {
+                sig(v)
+            }
+        };
+        let at = span(fmt(x(group[0])), fmt(x(group[j - i - 1])));
+        let mut part = format!("{l} at {what} {at}");
+        let finished = !matches!(group[0].outcome, Outcome::Failed(_));
+        let mut notes = Vec::new();
+        if steps {
+            let (lo, hi) = extent(group.iter().map(|r| r.steps_done as f64)).unwrap_or_default();
+            let unit = if hi == 1.0 { "step" } else { "steps" };
+            notes.push(format!("{} {unit}", span(format!("{lo}"), format!("{hi}"))));
+        }
+        if finished {
+            if let Some((lo, hi)) = extent(group.iter().map(|r| r.err_final)) {
+                notes.push(format!("{} off", span(fmt_e(lo, 1), fmt_e(hi, 1))));
+            }
+        }
+        if !notes.is_empty() {
+            let _ = write!(part, " ({})", notes.join(", "));
+        }
+        parts.push(part);
+        i = j;
+    }
+    parts.join("; ")
+}
+
+/// Each scheme's stretches on `scene`, from `rows` (fixed steps by `h`, largest first, or
+/// adaptive runs by tolerance, loosest first), one scheme after another.
+fn by_scheme(rows: &[Row], scene: &str, scale: f64, adaptive: bool) -> String {
+    let mut methods: Vec<&str> = Vec::new();
+    for r in rows.iter().filter(|r| r.scene == scene) {
+        if !methods.contains(&r.method.as_str()) {
+            methods.push(&r.method);
+        }
+    }
+    let mut parts = Vec::new();
+    for m in methods {
+        let mut rs: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.scene == scene && r.method == m)
+            .collect();
+        let x = |r: &Row| {
+            if adaptive {
+                r.tol.unwrap_or(f64::NAN)
+            } else {
+                r.h
+            }
+        };
+        rs.sort_by(|a, b| x(b).total_cmp(&x(a)));
+        let what = if adaptive { "tol" } else { "h" };
+        parts.push(format!(
+            "`{m}` {}",
+            stretches(&rs, scale, what, x, adaptive)
+        ));
+    }
+    parts.join("; ")
+}
+
+/// Each stiff baseline's tolerances on `scene`, those it finished and those it failed.
+fn baselines(rows: &[BaselineRow], scene: &str) -> String {
+    let mut parts = Vec::new();
+    for solver in [Baseline::Bdf, Baseline::Esdirk34] {
+        let rs: Vec<&BaselineRow> = rows
+            .iter()
+            .filter(|r| r.scene == scene && r.solver == solver)
+            .collect();
+        if rs.is_empty() {
+            continue;
+        }
+        let tols = |ok: bool| {
+            let ts: Vec<String> = rs
+                .iter()
+                .filter(|r| r.failure.is_none() == ok)
+                .map(|r| format!("{:.0e}", r.tol))
+                .collect();
+            if ts.is_empty() {
+                None
+            } else {
+                Some(format!("tol {}", ts.join(", ")))
+            }
+        };
+        let part = match (tols(true), tols(false)) {
+            (Some(ok), Some(failed)) => format!("{solver} finished at {ok} and failed at {failed}"),
+            (Some(ok), None) => format!("{solver} finished at every {ok}"),
+            (None, Some(failed)) => format!("{solver} failed at every {failed}"),
+            (None, None) => continue,
+        };
+        parts.push(part);
+    }
+    parts.join("; ")
+}
+
+/// The chain's `hω` of a step `h`.
+fn h_omega(h: f64) -> f64 {
+    h * super::scenes::chain_omega_max()
+}
+
+/// The remarks, from the run's rows; a scene this run left out (a `--only` run) gets none.
+pub fn remarks(s: &Summary, cases: &[&dyn Case], targets: &[f64]) -> String {
+    let has = |scene: &str| cases.iter().find(|c| c.name() == scene).copied();
+    let mut md = String::from(
+        "### Remarks\n\nEvery figure below is this run's, read from the rows above.\n\n",
+    );
+    if let Some(c) = has(CHAIN) {
+        let scale = c.scale();
+        let mut rs: Vec<&Row> = s.rows.iter().filter(|r| r.scene == CHAIN).collect();
+        rs.sort_by(|a, b| a.h.total_cmp(&b.h));
+        let mut methods: Vec<&str> = Vec::new();
+        for r in &rs {
+            if !methods.contains(&r.method.as_str()) {
+                methods.push(&r.method);
+            }
+        }
+        let lines: Vec<String> = methods
+            .iter()
+            .map(|m| {
+                let mine: Vec<&Row> = rs.iter().copied().filter(|r| r.method == *m).collect();
+                format!(
+                    "`{m}` {}",
+                    stretches(&mine, scale, "hω", |r| h_omega(r.h), false)
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            md,
+            "- **The Lobatto schemes are only conditionally stable on stiff oscillations.** \
+             With Lobatto quadrature the Galerkin schemes are of partitioned Lobatto \
+             IIIA–IIIB type (lobatto2 is Störmer–Verlet), and the midpoint rule is the \
+             implicit midpoint rule. None of them is L-stable: they do not damp what they do \
+             not resolve. On `{CHAIN}`, by hω (smallest first): {}.",
+            lines.join("; ")
+        );
+    }
+    if let Some(c) = has(RELAXATION) {
+        let _ = write!(
+            md,
+            "- **Relaxation jumps.** `{RELAXATION}` with fixed steps, by h (largest first): \
+             {}.",
+            by_scheme(&s.rows, RELAXATION, c.scale(), false)
+        );
+        if let Some(line) = super::adaptive_section::stiff_lines(s).first() {
+            if let Some((r, secs)) = line.variational {
+                let _ = write!(
+                    md,
+                    " With error control (Stiff cost above) the cheapest run to {:.0e} is `{}` \
+                     at tol {:.0e}: {} steps, {} off",
+                    line.target,
+                    r.method,
+                    r.tol.unwrap_or(f64::NAN),
+                    r.steps_done,
+                    fmt_e(r.err_final, 1)
+                );
+                if let Some((_, b)) = line.baselines[0].filter(|(_, b)| *b > 0.0) {
+                    let _ = write!(md, ", {:.1} times BDF's time to the same error", secs / b);
+                }
+                md.push('.');
+            }
+        }
+        md.push('\n');
+    }
+    if let Some(c) = has(SCALED) {
+        let _ = writeln!(
+            md,
+            "- **Hairer's scaled form with μ = 10⁶.** Fixed steps, by h (largest first): {}. \
+             With error control, by tolerance (loosest first): {}. Error control per unit \
+             step (see Adaptive runs) gives a step of size h the budget tol·h/T of the local \
+             error, with T = 2·10⁶ in t: at a jump the steps shrink until the scheme resolves \
+             it, and a scheme that cannot before the clock's floor 16ε·t ends in \
+             `step_size_too_small`. The stiff baselines: {}.",
+            by_scheme(&s.rows, SCALED, c.scale(), false),
+            by_scheme(&s.adaptive, SCALED, c.scale(), true),
+            baselines(&s.baselines, SCALED)
+        );
+    }
+    let mild: Vec<&dyn Case> = MILD.iter().filter_map(|n| has(n)).collect();
+    if !mild.is_empty() {
+        let rows: Vec<&Row> = s
+            .rows
+            .iter()
+            .filter(|r| mild.iter().any(|c| c.name() == r.scene))
+            .collect();
+        let ok = rows.iter().filter(|r| r.outcome == Outcome::Ok).count();
+        let mut ratios = Vec::new();
+        for c in &mild {
+            for &target in targets.iter().filter(|&&t| c.accuracy() * 10.0 <= t) {
+                let v = [
+                    best_variational(&s.rows, c.name(), target),
+                    best_variational(&s.adaptive, c.name(), target),
+                ]
+                .into_iter()
+                .flatten()
+                .map(|r| r.seconds)
+                .min_by(f64::total_cmp);
+                let b = [Baseline::Bdf, Baseline::Esdirk34]
+                    .into_iter()
+                    .filter_map(|solver| best_baseline(&s.baselines, c.name(), solver, target))
+                    .map(|r| r.seconds)
+                    .min_by(f64::total_cmp);
+                if let (Some(v), Some(b)) = (v, b) {
+                    if b > 0.0 {
+                        ratios.push(v / b);
+                    }
+                }
+            }
+        }
+        let names: Vec<String> = mild.iter().map(|c| format!("`{}`", c.name())).collect();
+        let _ = write!(
+            md,
+            "- **Mildly stiff problems.** On {}, {ok} of {} fixed-step runs finish `ok`",
+            names.join(" and "),
+            rows.len()
+        );
+        if let Some((lo, hi)) = extent(ratios.iter().copied()) {
+            let _ = write!(
+                md,
+                "; the cheapest variational run to a target takes {} times the cheapest stiff \
+                 baseline's time ({} targets; single runs on a shared machine: read ratios \
+                 within about 2 as ties)",
+                span(sig(lo), sig(hi)),
+                ratios.len()
+            );
+        }
+        md.push_str(".\n");
+    }
+    let scale = |r: &Row| {
+        cases
+            .iter()
+            .find(|c| c.name() == r.scene)
+            .map_or(f64::INFINITY, |c| c.scale())
+    };
+    let balance = extent(
+        s.rows
+            .iter()
+            .filter(|r| r.method == "midpoint" && is_wrong(r, scale(r)))
+            .map(|r| r.max_energy_balance_err),
+    );
+    md.push_str(
+        "- **`ok` is not `accurate`.** The runtime sees finite values and a converged Newton \
+         solve; it cannot see a run that is stable but wrong. The `wrong` column and \
+         `err_final` do.",
+    );
+    if let Some((_, hi)) = balance {
+        let _ = write!(
+            md,
+            " Where the midpoint rule finishes wrong, its energy balance error is at most {}: \
+             a small energy-balance error is no evidence of accuracy either.",
+            fmt_e(hi, 1)
+        );
+    }
+    md.push('\n');
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_print_in_two_significant_digits() {
+        assert_eq!(sig(0.1), "0.1");
+        assert_eq!(sig(3.0), "3");
+        assert_eq!(sig(1000.0), "1000");
+        assert_eq!(sig(0.30000001), "0.3");
+        assert_eq!(sig(5e-5), "5.0e-5");
+        assert_eq!(sig(2.5e7), "2.5e7");
+        assert_eq!(span("1".into(), "1".into()), "1");
+        assert_eq!(span("1".into(), "2".into()), "1 to 2");
+    }
+}
