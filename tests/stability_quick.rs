@@ -74,4 +74,22 @@ fn extreme_stability_quick_report() {
     assert!(readme.contains("## Stability on stiff and extreme cases"));
     let section = fs::read_to_string(out.join("sections").join("stability.md")).unwrap();
     assert!(section.contains("### Adaptive runs"));
+
+    // The remarks are this run's: the chain's line names every outcome its fixed-step rows
+    // had, with the largest hω of the grid as the run computed it.
+    let remarks = section
+        .split("### Remarks")
+        .nth(1)
+        .expect("a Remarks subsection");
+    let chain = remarks
+        .lines()
+        .find(|l| l.contains("`stiff_spring_chain`"))
+        .expect("a remark on the chain");
+    for row in &rows {
+        let cols: Vec<&str> = row.split(',').collect();
+        if cols[0] == "stiff_spring_chain" && cols[8] == "fixed" {
+            assert!(chain.contains(&format!("`{}`", cols[1])), "{row}: {chain}");
+            assert!(chain.contains(&format!("`{}`", cols[3])), "{row}: {chain}");
+        }
+    }
 }

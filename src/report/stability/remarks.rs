@@ -341,20 +341,3 @@ pub fn remarks(s: &Summary, cases: &[&dyn Case], targets: &[f64]) -> String {
     md.push('\n');
     md
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn values_print_in_two_significant_digits() {
-        assert_eq!(sig(0.1), "0.1");
-        assert_eq!(sig(3.0), "3");
-        assert_eq!(sig(1000.0), "1000");
-        assert_eq!(sig(0.30000001), "0.3");
-        assert_eq!(sig(5e-5), "5.0e-5");
-        assert_eq!(sig(2.5e7), "2.5e7");
-        assert_eq!(span("1".into(), "1".into()), "1");
-        assert_eq!(span("1".into(), "2".into()), "1 to 2");
-    }
-}
