@@ -633,6 +633,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         crate::newton::force_round_off_rate(p.noise, p.noise_h) + velocities
     }
 
+    fn force_gain(&self, h: f64) -> f64 {
+        let row_sums = |m: &nalgebra::SMatrix<f64, N, N>| {
+            (0..N).fold(0.0f64, |best, r| {
+                best.max((0..N).map(|c| m[(r, c)].abs()).sum::<f64>())
+            })
+        };
+        let (a, b) = self.prob.jacs.iter().fold((0.0f64, 0.0f64), |(a, b), j| {
+            (a.max(row_sums(&j.a)), b.max(row_sums(&j.b)))
+        });
+        h * a + b
+    }
+
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
         let prob = &mut self.prob;
         prob.nodes_valid = false;

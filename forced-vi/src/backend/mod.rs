@@ -243,6 +243,12 @@ pub(crate) trait StepBackend {
     /// (`A = ∂(L_q + F)/∂q`, `B = ∂(L_q + F)/∂v`): times ε, the round-off of the forces
     /// there, which the rounding of their positions and velocities carries.
     fn force_round_off_rate(&self) -> f64;
+    /// `h |A| + |B|` over the nodes of the last Jacobian, in row sums (an upper bound):
+    /// how much an error `δ` in every increment of a step of size `h` moves a node's
+    /// `L_q + F` (the positions by `δ`, the velocities by about `δ / h`), and so the
+    /// momentum update `h Σ_i b_i (L_q + F)_i`, per unit of `δ` (see `crate::control`,
+    /// "Newton's stop").
+    fn force_gain(&self, h: f64) -> f64;
     /// Sets a step `(h, t0, (q0, p0))` and its solution `z` without solving, for the
     /// backward pass of an adjoint.
     fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]);
@@ -518,6 +524,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     }
     fn force_round_off_rate(&self) -> f64 {
         forward!(self, b => b.force_round_off_rate())
+    }
+    fn force_gain(&self, h: f64) -> f64 {
+        forward!(self, b => b.force_gain(h))
     }
     fn restore(&mut self, h: f64, t0: f64, start: (&[f64], &[f64]), z: &[f64]) {
         forward!(self, b => b.restore(h, t0, start, z))

@@ -428,6 +428,10 @@ impl StepBackend for SparseBackend<'_> {
         self.prob.force_round_off_rate()
     }
 
+    fn force_gain(&self, h: f64) -> f64 {
+        self.prob.force_gain(h)
+    }
+
     fn restore(&mut self, h: f64, t0: f64, (q0, p0): (&[f64], &[f64]), z: &[f64]) {
         let prob = &mut self.prob;
         prob.h = h;

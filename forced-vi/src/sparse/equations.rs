@@ -87,6 +87,28 @@ impl<'a> SparseStep<'a> {
         crate::newton::force_round_off_rate(self.noise, self.noise_h) + velocities
     }
 
+    /// `h |A| + |B|` over the node blocks of the last Jacobian, in row sums (see
+    /// [`crate::backend::StepBackend::force_gain`]).
+    pub(crate) fn force_gain(&self, h: f64) -> f64 {
+        // The blocks' values are stored row by row, in the pattern's compressed rows.
+        let largest_row = |vals: &[f64]| {
+            let (mut best, mut k) = (0.0f64, 0);
+            for r in 0..self.pattern.n() {
+                let len = self.pattern.row(r).len();
+                let sum: f64 = vals
+                    .get(k..k + len)
+                    .map_or(0.0, |row| row.iter().map(|v| v.abs()).sum());
+                best = best.max(sum);
+                k += len;
+            }
+            best
+        };
+        let (a, b) = self.blocks.iter().fold((0.0f64, 0.0f64), |(a, b), blk| {
+            (a.max(largest_row(&blk.a)), b.max(largest_row(&blk.b)))
+        });
+        h * a + b
+    }
+
     /// Buffers for `node` and `scheme` on a recorded pattern; for a constrained model, with
     /// the pattern of `G` (whose curvature entries the node pattern holds).
     pub(crate) fn new(

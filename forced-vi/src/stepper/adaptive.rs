@@ -130,9 +130,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             // Solved to a small share of the step's tolerance and of the last step's
             // estimate, not to round-off: the estimate measures the step as solved (see
             // `crate::control`, "Newton's stop").
+            // An error `δ` in the increments moves the momentum update by up to
+            // `(h |A| + |B|) δ`: the bound holds for the larger of the two (a strongly damped
+            // model, `|B|` of 10⁶, would otherwise read Newton's error in its momenta at
+            // every step size alike, and shrink its steps to the floor).
             let saved = (&self.saved.q.sum[..], &self.saved.p.sum[..]);
             let share = NEWTON_SHARE * self.err_last.min(1.0);
-            let within = tol.uniform_error(per_unit, share, saved);
+            let gain = self.backend.force_gain(h).max(1.0);
+            let within = tol.uniform_error(per_unit, share, saved) / gain;
             self.backend.solve_within(within);
             let solved = self.attempt(h, &mut iters).and_then(|res| {
                 let err = self.estimate(h, per_unit, tol, &mut iters)?;
