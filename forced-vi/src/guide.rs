@@ -560,7 +560,7 @@
 //! (measured, not proved: an estimate can be fooled). A step and its estimate see the
 //! forces at their nodes only: a force that acts only between them (a pulse shorter than
 //! the steps, a narrow well crossed fast) can be missed by both, with an `Ok` (measured on
-//! a pulse of width 10⁻³: lobatto5 at tol 1e-8 took 8 steps over it, error 1.06). Bound
+//! a pulse of width 10⁻³: lobatto5 at tol 1e-8 took 6 steps to t = 3, error 1.06). Bound
 //! the steps below such a feature's width with [`Integrator::max_step`], or put an output
 //! time of [`output::Samples`](crate::output::Samples) on a feature at a known time: a
 //! step then ends on it.
