@@ -81,7 +81,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         st.z_prev.copy_from_slice(z);
         // The extrapolation's errors are kept from a step that took more than one Newton
         // iteration on, while correcting by them helps (see `Stepper::predict`).
-        if self.extrapolated_same && (iterations > 1 || st.deltas > 0) {
+        if self.extrapolated_near && (iterations > 1 || st.deltas > 0) {
             // The error of the extrapolation at this step, and what the correction by the
             // last two steps' errors left of it (applied or not), in one pass that also
             // keeps the new error.

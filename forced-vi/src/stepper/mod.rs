@@ -208,9 +208,9 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Scratch: the predictor's basis values at one control point (entry `m = 1 … s − 1`).
     basis: Vec<f64>,
     /// The predictor's extrapolation for the step being solved, before the correction by
-    /// the last step's `pred_delta`, and whether it was made at an unchanged step size.
+    /// the last step's `pred_delta`, and whether it was made at a step size near the last one.
     extrapolated: Vec<f64>,
-    extrapolated_same: bool,
+    extrapolated_near: bool,
     err: (Vec<f64>, Vec<f64>),
     /// The time of the record last handed out.
     t: f64,

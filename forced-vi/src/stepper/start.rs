@@ -140,7 +140,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             dp: vec![0.0; N],
             basis: vec![0.0; scheme.stages()],
             extrapolated: vec![0.0; unknowns],
-            extrapolated_same: false,
+            extrapolated_near: false,
             err: (vec![0.0; 2 * N], vec![0.0; 2 * N]),
             t: 0.0,
             tolerance,
@@ -206,7 +206,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             dp,
             basis,
             extrapolated,
-            extrapolated_same,
+            extrapolated_near,
             err,
             t,
             tolerance: _,
@@ -247,7 +247,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         ] {
             x.fill(0.0);
         }
-        *extrapolated_same = false;
+        *extrapolated_near = false;
         *t = 0.0;
         *controller = Controller::new(scheme.order());
         *h_next = h.min(options.max_step);
