@@ -223,26 +223,29 @@ impl Scheme {
     /// `λh = 10⁶` one step returns the velocity as `+v₀` for s = 3, 5, 7 and as `−v₀` for
     /// s = 2, 4, 6, 8), and on the van der Pol oscillator at μ = 10⁶ the odd ones fail
     /// where the even ones do not (`examples/auto_order`, from the automatic first step,
-    /// capped at 2·10⁶ steps): adaptive lobatto5 stopped with a step too small at tol 1e-5
-    /// and took 3.7·10⁵ steps at 1e-6, and lobatto5 and lobatto7 reached the cap at 1e-7
-    /// and 1e-9, while lobatto6 took 1.3·10³ to 6.9·10³ steps from 1e-3 to 1e-7 and
-    /// lobatto8 8.8·10⁴ at 1e-9 (lobatto6 reached the cap there), every run that finished
-    /// within 1e-11 of the reference; on a slowly driven over-damped oscillator (λ = 10⁶,
-    /// held out) lobatto6 took 540 and 1098 steps at 1e-3 and 1e-5, lobatto5 4636 and
-    /// 17098. The parity is not the whole story: on the same van der Pol, lobatto9 and
-    /// lobatto10 finish at tol 1e-3, but at 1e-6 and 1e-7 they stop with a step too small
-    /// or reach the cap of 2·10⁶ steps, three of the four runs at its first relaxation
-    /// jump. On the non-stiff models of that example this rule
-    /// took 1.00–1.16 times the cheapest fixed choice (median 1.01–1.02, four runs), where the
-    /// cheapest stage count per tolerance (lobatto5 above 10⁻⁶, lobatto7 at 10⁻⁹ and below,
-    /// the rule before) took 0.99–1.06.
+    /// capped at 2·10⁶ steps; measured at the commit that last changed these figures):
+    /// adaptive lobatto5 took 1.8·10⁴ steps at tol 1e-5 and 8.0·10⁵ at 1e-6, and lobatto5
+    /// and lobatto7 reached the cap at 1e-7 and 1e-9, while lobatto6 took 1.2·10³ to
+    /// 6.0·10³ steps from 1e-3 to 1e-7 and lobatto8 1.3·10⁵ at 1e-9 (lobatto6 reached the
+    /// cap there), every run that finished within 1e-11 of the reference; on a slowly
+    /// driven over-damped oscillator (λ = 10⁶, held out) lobatto6 took 521 and 1195 steps
+    /// at 1e-3 and 1e-5, lobatto5 4638 and 17191. The parity is not the whole story: on the
+    /// same van der Pol, lobatto9 and lobatto10 finish at tol 1e-3, but at 1e-6 and 1e-7
+    /// they stop with a step too small or reach the cap of 2·10⁶ steps, three of the four
+    /// runs at its first relaxation jump (measured when the rule was chosen). On the
+    /// non-stiff models of that example this rule took 0.92–1.27 times the cheapest fixed
+    /// choice (median 1.00 and 1.02, two runs, timed in rotated rounds; the same
+    /// computation timed twice in those rounds differed by up to 1.25×). When the rule was
+    /// chosen, the cheapest stage count per tolerance (lobatto5 above 10⁻⁶, lobatto7 at
+    /// 10⁻⁹ and below, the rule before) took 0.99–1.06 and the rule 1.00–1.16, timed apart.
     ///
     /// On the sparse backend the LU's fill grows with the stages: `lobatto4` at every
     /// tolerance. lobatto3 is cheaper on the report's large non-stiff scenes at tol 1e-4
-    /// (lobatto4 takes 1.5 and 1.7 times its time on the FPU chain and the 2-D lattice at
-    /// n = 1024), but on a stiff one it takes tens of times more steps: on an over-damped
-    /// chain of 32 masses (`examples/auto_order`) lobatto3 took 3.1·10⁴ and 2.0·10⁵ steps
-    /// at tol 1e-3 and 1e-5, 24 and 46 times lobatto4's time (809 and 2901 steps).
+    /// (lobatto4 takes 1.6 and 1.9 times its time on the FPU chain and the 2-D lattice at
+    /// n = 1024 in the committed report), but on a stiff one it takes tens of times more
+    /// steps: on an over-damped chain of 32 masses (`examples/auto_order`) lobatto3 took
+    /// 3.1·10⁴ and 2.0·10⁵ steps at tol 1e-3 and 1e-5, 22–24 and 44–53 times lobatto4's
+    /// time (809 and 2901 steps; two runs).
     ///
     /// A tolerance that is not finite or not positive gets `lobatto6` (`lobatto4` on the
     /// sparse backend). [`crate::Integrator::auto`] applies it.
