@@ -75,14 +75,15 @@ fn extreme_stability_quick_report() {
     let section = fs::read_to_string(out.join("sections").join("stability.md")).unwrap();
     assert!(section.contains("### Adaptive runs"));
 
-    // The remarks are this run's: the chain's line names every outcome its fixed-step rows
-    // had, with the largest hω of the grid as the run computed it.
+    // The remarks are this run's: the chain's remark (its sentence and its table) names
+    // every outcome its fixed-step rows had, with the largest hω of the grid as the run
+    // computed it.
     let remarks = section
         .split("### Remarks")
         .nth(1)
         .expect("a Remarks subsection");
     let chain = remarks
-        .lines()
+        .split("\n- **")
         .find(|l| l.contains("`stiff_spring_chain`"))
         .expect("a remark on the chain");
     for row in &rows {

@@ -66,17 +66,30 @@ fn label(r: &Row, scale: f64) -> String {
     }
 }
 
-/// One scheme's runs, in the order given (by step or tolerance, `x` of each row under the
-/// name `what`), as the stretches of equal outcome: `ok at h 1 to 0.1 (errors 1e-3 to
-/// 1e-6), failed:overflow at h 0.05`; with the steps taken where `steps` is set.
+/// A run of equal outcome within one scheme's runs (see [`stretches`]).
+struct Stretch {
+    /// How the runs ended, as the tables above write it.
+    outcome: String,
+    /// Their `h`, `hω` or tolerance, first to last.
+    at: String,
+    /// The steps they took (adaptive runs).
+    steps: Option<String>,
+    /// Their final errors (finished runs).
+    err: Option<String>,
+}
+
+/// One scheme's runs, in the order given (by step or tolerance, `x` of each row, `tol`
+/// printed as a power of ten), as the stretches of equal outcome: `ok` at h 1 to 0.1 with
+/// errors 1e-3 to 1e-6, then `failed:overflow` at h 0.05; with the steps taken where
+/// `steps` is set.
 fn stretches(
     rows: &[&Row],
     scale: f64,
-    what: &str,
+    tol: bool,
     x: impl Fn(&Row) -> f64,
     steps: bool,
-) -> String {
-    let mut parts: Vec<String> = Vec::new();
+) -> Vec<Stretch> {
+    let mut out = Vec::new();
     let mut i = 0;
     while i < rows.len() {
         let l = label(rows[i], scale);
@@ -85,38 +98,59 @@ fn stretches(
             j += 1;
         }
         let group = &rows[i..j];
-        let fmt = |v: f64| {
-            if what == "tol" {
-                format!("{v:.0e}")
-            } else {
-                sig(v)
-            }
-        };
+        let fmt = |v: f64| if tol { format!("{v:.0e}") } else { sig(v) };
         let at = span(fmt(x(group[0])), fmt(x(group[j - i - 1])));
-        let mut part = format!("{l} at {what} {at}");
         let finished = !matches!(group[0].outcome, Outcome::Failed(_));
-        let mut notes = Vec::new();
-        if steps {
+        let steps = steps.then(|| {
             let (lo, hi) = extent(group.iter().map(|r| r.steps_done as f64)).unwrap_or_default();
-            let unit = if hi == 1.0 { "step" } else { "steps" };
-            notes.push(format!("{} {unit}", span(format!("{lo}"), format!("{hi}"))));
-        }
-        if finished {
-            if let Some((lo, hi)) = extent(group.iter().map(|r| r.err_final)) {
-                notes.push(format!("{} off", span(fmt_e(lo, 1), fmt_e(hi, 1))));
-            }
-        }
-        if !notes.is_empty() {
-            let _ = write!(part, " ({})", notes.join(", "));
-        }
-        parts.push(part);
+            span(format!("{lo}"), format!("{hi}"))
+        });
+        let err = finished
+            .then(|| extent(group.iter().map(|r| r.err_final)))
+            .flatten()
+            .map(|(lo, hi)| span(fmt_e(lo, 1), fmt_e(hi, 1)));
+        out.push(Stretch {
+            outcome: l,
+            at,
+            steps,
+            err,
+        });
         i = j;
     }
-    parts.join("; ")
+    out
+}
+
+/// The stretches of several schemes as one table: a row per stretch, the scheme named on
+/// its first; `what` heads the column of steps or tolerances.
+fn table(what: &str, schemes: &[(String, Vec<Stretch>)]) -> String {
+    let with_steps = schemes
+        .iter()
+        .any(|(_, st)| st.iter().any(|x| x.steps.is_some()));
+    let mut md = format!("\n| scheme | outcome | {what} |");
+    md.push_str(if with_steps { " steps |" } else { "" });
+    md.push_str(" error |\n|---|---|---|");
+    md.push_str(if with_steps { "---|" } else { "" });
+    md.push_str("---|\n");
+    for (scheme, st) in schemes {
+        for (k, x) in st.iter().enumerate() {
+            let name = if k == 0 {
+                format!("`{scheme}`")
+            } else {
+                String::new()
+            };
+            let _ = write!(md, "| {name} | {} | {} |", x.outcome, x.at);
+            if with_steps {
+                let _ = write!(md, " {} |", x.steps.as_deref().unwrap_or("–"));
+            }
+            let _ = writeln!(md, " {} |", x.err.as_deref().unwrap_or("–"));
+        }
+    }
+    md.push('\n');
+    md
 }
 
 /// Each scheme's stretches on `scene`, from `rows` (fixed steps by `h`, largest first, or
-/// adaptive runs by tolerance, loosest first), one scheme after another.
+/// adaptive runs by tolerance, loosest first), as a table.
 fn by_scheme(rows: &[Row], scene: &str, scale: f64, adaptive: bool) -> String {
     let mut methods: Vec<&str> = Vec::new();
     for r in rows.iter().filter(|r| r.scene == scene) {
@@ -124,7 +158,7 @@ fn by_scheme(rows: &[Row], scene: &str, scale: f64, adaptive: bool) -> String {
             methods.push(&r.method);
         }
     }
-    let mut parts = Vec::new();
+    let mut schemes = Vec::new();
     for m in methods {
         let mut rs: Vec<&Row> = rows
             .iter()
@@ -138,13 +172,9 @@ fn by_scheme(rows: &[Row], scene: &str, scale: f64, adaptive: bool) -> String {
             }
         };
         rs.sort_by(|a, b| x(b).total_cmp(&x(a)));
-        let what = if adaptive { "tol" } else { "h" };
-        parts.push(format!(
-            "`{m}` {}",
-            stretches(&rs, scale, what, x, adaptive)
-        ));
+        schemes.push((m.to_string(), stretches(&rs, scale, adaptive, x, adaptive)));
     }
-    parts.join("; ")
+    table(if adaptive { "tol" } else { "h" }, &schemes)
 }
 
 /// Each stiff baseline's tolerances on `scene`, those it finished and those it failed.
@@ -202,32 +232,30 @@ pub fn remarks(s: &Summary, cases: &[&dyn Case], targets: &[f64]) -> String {
                 methods.push(&r.method);
             }
         }
-        let lines: Vec<String> = methods
+        let schemes: Vec<(String, Vec<Stretch>)> = methods
             .iter()
             .map(|m| {
                 let mine: Vec<&Row> = rs.iter().copied().filter(|r| r.method == *m).collect();
-                format!(
-                    "`{m}` {}",
-                    stretches(&mine, scale, "hω", |r| h_omega(r.h), false)
-                )
+                let st = stretches(&mine, scale, false, |r| h_omega(r.h), false);
+                (m.to_string(), st)
             })
             .collect();
-        let _ = writeln!(
+        let _ = write!(
             md,
             "- **The Lobatto schemes are only conditionally stable on stiff oscillations.** \
              With Lobatto quadrature the Galerkin schemes are of partitioned Lobatto \
              IIIA–IIIB type (lobatto2 is Störmer–Verlet), and the midpoint rule is the \
              implicit midpoint rule. None of them is L-stable: they do not damp what they do \
-             not resolve. On `{CHAIN}`, by hω (smallest first): {}.",
-            lines.join("; ")
+             not resolve. On `{CHAIN}`, by hω (smallest first), each scheme's runs of equal \
+             outcome:\n{}",
+            table("hω", &schemes)
         );
     }
     if let Some(c) = has(RELAXATION) {
         let _ = write!(
             md,
-            "- **Relaxation jumps.** `{RELAXATION}` with fixed steps, by h (largest first): \
-             {}.",
-            by_scheme(&s.rows, RELAXATION, c.scale(), false)
+            "- **Relaxation jumps.** `{RELAXATION}` with fixed steps, by h (largest first), \
+             in the table below."
         );
         if let Some(line) = super::adaptive_section::stiff_lines(s).first() {
             if let Some((r, secs)) = line.variational {
@@ -248,19 +276,20 @@ pub fn remarks(s: &Summary, cases: &[&dyn Case], targets: &[f64]) -> String {
             }
         }
         md.push('\n');
+        md.push_str(&by_scheme(&s.rows, RELAXATION, c.scale(), false));
     }
     if let Some(c) = has(SCALED) {
-        let _ = writeln!(
+        let _ = write!(
             md,
-            "- **Hairer's scaled form with μ = 10⁶.** Fixed steps, by h (largest first): {}. \
-             With error control, by tolerance (loosest first): {}. Error control per unit \
-             step (see Adaptive runs) gives a step of size h the budget tol·h/T of the local \
-             error, with T = 2·10⁶ in t: at a jump the steps shrink until the scheme resolves \
-             it, and a scheme that cannot before the clock's floor 16ε·t ends in \
-             `step_size_too_small`. The stiff baselines: {}.",
+            "- **Hairer's scaled form with μ = 10⁶.** Error control per unit step (see \
+             Adaptive runs) gives a step of size h the budget tol·h/T of the local error, \
+             with T = 2·10⁶ in t: at a jump the steps shrink until the scheme resolves it, \
+             and a scheme that cannot before the clock's floor 16ε·t ends in \
+             `step_size_too_small`. The stiff baselines: {}. Fixed steps, by h (largest \
+             first):\n{}With error control, by tolerance (loosest first):\n{}",
+            baselines(&s.baselines, SCALED),
             by_scheme(&s.rows, SCALED, c.scale(), false),
-            by_scheme(&s.adaptive, SCALED, c.scale(), true),
-            baselines(&s.baselines, SCALED)
+            by_scheme(&s.adaptive, SCALED, c.scale(), true)
         );
     }
     let mild: Vec<&dyn Case> = MILD.iter().filter_map(|n| has(n)).collect();
