@@ -187,6 +187,30 @@ pub struct Newton {
 struct DenseLinear {
     lu: DenseLu,
     jac: DMatrix<f64>,
+    /// `max_b |J_ab|` for each row `a` of `jac`, made with it by one scan.
+    row_max: Vec<f64>,
+}
+
+impl DenseLinear {
+    /// Each row's largest absolute entry of `jac` into `row_max`; returns the largest of all
+    /// (a NaN entry counts as nothing, as in a fold with `f64::max`).
+    fn scan_rows(&mut self) -> f64 {
+        let rows = self.jac.nrows();
+        let out = &mut self.row_max;
+        if out.len() != rows {
+            out.resize(rows, 0.0);
+        }
+        out.fill(0.0);
+        // By slices of the column-major storage (nalgebra's column iterator cost four times
+        // as many instructions).
+        for col in self.jac.as_slice().chunks_exact(rows.max(1)) {
+            for (o, &x) in out.iter_mut().zip(col) {
+                let a = x.abs();
+                *o = if a > *o { a } else { *o };
+            }
+        }
+        out.iter().fold(0.0f64, |m, &x| if x > m { x } else { m })
+    }
 }
 
 impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
@@ -201,11 +225,7 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
     fn refresh(&mut self, sys: &mut S, z: &DVector<f64>) -> Result<f64, NewtonFailure> {
         sys.jacobian(z, &mut self.jac)?;
         self.lu.factor(&self.jac)?;
-        Ok(self
-            .jac
-            .as_slice()
-            .iter()
-            .fold(0.0f64, |m, x| m.max(x.abs())))
+        Ok(self.scan_rows())
     }
 
     #[inline(always)]
@@ -239,15 +259,10 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
 
     #[inline]
     fn row_max(&self, out: &mut [f64]) {
+        // Made by the refresh that made the factors (`scan_rows`).
         out.fill(0.0);
-        // By slices of the column-major storage (nalgebra's column iterator cost four times
-        // as many instructions).
-        let rows = self.jac.nrows().max(1);
-        for col in self.jac.as_slice().chunks_exact(rows) {
-            for (o, &x) in out.iter_mut().zip(col) {
-                let a = x.abs();
-                *o = if a > *o { a } else { *o };
-            }
+        for (o, &x) in out.iter_mut().zip(&self.row_max) {
+            *o = x;
         }
     }
 }
@@ -260,6 +275,7 @@ impl Newton {
             linear: DenseLinear {
                 lu: DenseLu::new(n),
                 jac: DMatrix::zeros(n, n),
+                row_max: vec![0.0; n],
             },
         }
     }
