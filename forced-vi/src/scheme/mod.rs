@@ -492,10 +492,15 @@ impl Scheme {
             }
         })
     }
-    /// `ℓ_m(1 + d_j)`: extrapolation to the next step's control points.
+    /// `ℓ_m(1 + d_j)` for every `m`: extrapolation to the next step's control point `j`
+    /// (empty for a `j` beyond the control points).
     #[inline]
-    pub(crate) fn extrapolation(&self, j: usize, m: usize) -> f64 {
-        self.t.extrapolation[j * self.t.d.len() + m]
+    pub(crate) fn extrapolation_row(&self, j: usize) -> &[f64] {
+        let len = self.t.d.len();
+        self.t
+            .extrapolation
+            .get(j * len..(j + 1) * len)
+            .unwrap_or(&[])
     }
 
     /// Whether the predictor extrapolates the previous step's polynomial (false for

@@ -68,16 +68,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 }
                 continue;
             }
-            if same {
-                for (m, l) in basis.iter_mut().enumerate().skip(1) {
-                    *l = sch.extrapolation(j, m);
-                }
+            // Equal steps read the table's row in place.
+            let row: &[f64] = if same {
+                sch.extrapolation_row(j)
             } else {
                 sch.basis_at(1.0 + dj * h / st.h_prev, basis);
-            }
+                basis
+            };
             for a in 0..N {
                 let mut x = -st.z_prev[lay.at(s1, a)];
-                for (m, l) in basis.iter().enumerate().skip(1) {
+                for (m, l) in row.iter().enumerate().skip(1) {
                     x += st.z_prev[lay.at(m, a)] * l;
                 }
                 let i = lay.at(j, a);
