@@ -281,7 +281,7 @@ pub(crate) trait StepBackend {
 #[allow(clippy::large_enum_variant)]
 pub(crate) enum Backend<'a, M, const N: usize> {
     /// `N × N` node blocks.
-    Dense(DenseBackend<'a, M, N>),
+    Dense(Box<DenseBackend<'a, M, N>>),
     /// Node blocks on the model's sparse pattern.
     #[cfg(feature = "sparse")]
     Sparse(Box<SparseBackend<'a>>),

@@ -128,9 +128,9 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
                 });
             }
         }
-        Ok(Backend::Dense(DenseBackend::new(
+        Ok(Backend::Dense(Box::new(DenseBackend::new(
             self.model, scheme, newton,
-        )))
+        ))))
     }
 
     /// The sparse backend if the run takes it.
