@@ -479,3 +479,40 @@ fn extreme_overdamped_chain_auto_takes_few_steps_on_the_sparse_backend() {
         .fold(0.0, f64::max);
     assert!(err <= 1e-3, "off by {err:e}");
 }
+
+/// `Integrator::auto` on a smaller model of the sparse backend (12 masses, the same
+/// over-damped chain): there the node evaluations, not the LU, are most of a step, and it
+/// takes the dense column's order (lobatto6 at tol 1e-3, order 10), still on the sparse
+/// backend. Measured (`Scheme::AUTO_SPARSE_MIN_DOF`): 162 steps in 5.3 ms, where lobatto4,
+/// which it took before, needed 852 steps and 11.7 ms.
+#[test]
+fn extreme_small_sparse_chain_auto_takes_the_dense_order() {
+    const N: usize = 12;
+    let model = forced_vi_models::models::SpringChain::<N> {
+        m: 1.0,
+        k: 1e4,
+        beta: 1.0,
+        c: 1e5,
+    };
+    let q0: [f64; N] = std::array::from_fn(|i| {
+        let bump = if i == N / 2 { 0.05 } else { 0.0 };
+        0.1 * (std::f64::consts::PI * (i + 1) as f64 / (N + 1) as f64).sin() + bump
+    });
+    let init = InitialState::from_velocity(q0, [0.0; N]);
+    let auto = Integrator::auto(&model, 1e-3, 1e-3).unwrap();
+    assert_eq!(auto.path_for(&init).unwrap(), forced_vi::LinearPath::Sparse);
+    assert_eq!(auto.scheme().order(), 10);
+    let end = auto
+        .max_steps(2000)
+        .final_state(init, 200.0)
+        .unwrap_or_else(|f| panic!("{}", f.error));
+    let reference = Integrator::adaptive(&model, Scheme::lobatto(5).unwrap(), 1e-8, 1e-8)
+        .unwrap()
+        .final_state(init, 200.0)
+        .unwrap();
+    let err = (0..N)
+        .map(|i| (end.q[i] - reference.q[i]).abs())
+        .fold(0.0, f64::max);
+    assert!(err <= 1e-3, "off by {err:e}");
+    assert!(end.stats.steps < 400, "{} steps", end.stats.steps);
+}

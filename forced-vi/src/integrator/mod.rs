@@ -168,9 +168,11 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
 
     /// An adaptive integrator that chooses its order too: the Lobatto scheme of
     /// [`Scheme::for_tolerance`] for the tighter of `rtol` and `atol` (the positive one if the
-    /// other is zero) on the backend the model will take ([`LinearPath::Auto`]: the sparse
-    /// one for a model with sparse kernels and at least [`LinearPath::SPARSE_MIN_DOF`]
-    /// coordinates), then as [`Self::adaptive`].
+    /// other is zero): its sparse column for a model with sparse kernels and at least
+    /// [`Scheme::AUTO_SPARSE_MIN_DOF`] coordinates, which the sparse backend runs, its dense
+    /// column otherwise (a model of [`LinearPath::SPARSE_MIN_DOF`] to 31 coordinates with
+    /// sparse kernels runs on the sparse backend with the dense column's order); then as
+    /// [`Self::adaptive`].
     ///
     /// ```
     /// use forced_vi::prelude::*;
@@ -194,7 +196,10 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             (true, false) => rtol,
             _ => atol,
         };
-        let sparse = N >= LinearPath::SPARSE_MIN_DOF && model.sparse_node().is_some();
+        // The sparse column from `AUTO_SPARSE_MIN_DOF` coordinates only (a model on the
+        // sparse backend below them runs the dense column faster; see there).
+        let sparse = N >= LinearPath::SPARSE_MIN_DOF.max(Scheme::AUTO_SPARSE_MIN_DOF)
+            && model.sparse_node().is_some();
         Self::adaptive(model, Scheme::for_tolerance(tol, sparse), rtol, atol)
     }
 

@@ -210,9 +210,31 @@ impl Scheme {
         Self::new(SchemeId::Lobatto(s))
     }
 
+    /// The fewest coordinates from which [`crate::Integrator::auto`] takes the sparse
+    /// column of [`Scheme::for_tolerance`] (`lobatto4`) for a model on the sparse backend;
+    /// below them, the dense column.
+    ///
+    /// Measured on 2026-11-30 (adaptive runs, medians of 3; `rtol = atol = tol` from 1e-4
+    /// to 1e-12; the time of each rule's choice over the cheapest of lobatto4..8):
+    /// - the hand-written FPU chain to T = 20 (`forced_vi_models::large::FpuChain`), smooth:
+    ///   at n = 8 lobatto4 took 1.2–4.7 times the cheapest and the dense column 1.0–1.1;
+    ///   at n = 16, 1.0–2.4 against 1.2–1.5; at n = 32, 1.0–1.5 against 1.3–1.7; from
+    ///   n = 128 and 256 lobatto4 was the cheapest (within 1.01), the dense column 1.1–3.4;
+    /// - an FPU chain of 8 masses written with the macro (`tests/held_out_models_third.rs`):
+    ///   lobatto4 1.2–14.7 times the cheapest (120 ms against 8 ms at 1e-12), the dense
+    ///   column 1.0–1.15;
+    /// - the over-damped chain of `tests/extreme.rs` (c = 10⁵, T = 200; one run each, tol
+    ///   1e-3 to 1e-7, and 1e-10 at n = 8 and 12): the dense column took 0.07–0.63 times
+    ///   lobatto4's time at n = 8, 12 and 16, and 0.30–0.47 at n = 32.
+    ///
+    /// From 32 coordinates the two rules trade: lobatto4 is the cheaper on the smooth
+    /// chain, the dense column on the stiff one, and at n = 32 lobatto4 stays, as measured
+    /// when the rule was made on the large scenes.
+    pub const AUTO_SPARSE_MIN_DOF: usize = 32;
+
     /// The Lobatto scheme an adaptive run at tolerance `tol` should use, by backend.
     ///
-    /// | `tol` | dense backend (small models) | sparse backend (large models) |
+    /// | `tol` | dense column (small models) | sparse column (large models) |
     /// |---|---|---|
     /// | above `10⁻⁹` | `lobatto6` (order 10) | `lobatto4` (order 6) |
     /// | `10⁻⁹` and below | `lobatto8` (order 14) | `lobatto4` |
@@ -246,6 +268,11 @@ impl Scheme {
     /// steps: on an over-damped chain of 32 masses (`examples/auto_order`) lobatto3 took
     /// 3.1·10⁴ and 2.0·10⁵ steps at tol 1e-3 and 1e-5, 22–24 and 44–53 times lobatto4's
     /// time (809 and 2901 steps; two runs).
+    ///
+    /// That holds where the LU is most of a step. On the smaller models of the sparse
+    /// backend the node evaluations are, and the dense column is the cheaper one, stiff or
+    /// not: [`crate::Integrator::auto`] takes the sparse column only from
+    /// [`Scheme::AUTO_SPARSE_MIN_DOF`] coordinates.
     ///
     /// A tolerance that is not finite or not positive gets `lobatto6` (`lobatto4` on the
     /// sparse backend). [`crate::Integrator::auto`] applies it.
