@@ -60,8 +60,8 @@
 //! outside 0.8–1.2, and a largest final error of 4.67 times the tolerance (the
 //! Lennard-Jones pair, lobatto4; its orbit amplifies errors as the Kepler ones do). On the
 //! two masses on a stiff spring, lobatto3–5, lobatto7 and `auto` (lobatto8) end their runs at
-//! 1e-12 in `ToleranceBelowRoundOff`, where lobatto6 ends `Ok` 0.02
-//! times the tolerance off: each step's momentum comparison leaves out the spring's rounding,
+//! 1e-12 in `ToleranceBelowRoundOff`, where lobatto6 ends `Ok` 0.02 times the tolerance
+//! off: each step's momentum comparison leaves out the spring's rounding,
 //! `4 ε h |A| |x|` with `|A| = 2·10⁴`, about 0.02–0.04 of the tolerance per step at 1e-12,
 //! and the run adds those up plainly (see `forced_vi::control`, "What the estimates leave
 //! out"); the larger steps of the higher orders leave out more per step.
