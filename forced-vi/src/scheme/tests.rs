@@ -121,7 +121,9 @@ fn the_order_follows_the_tolerance_and_the_backend() {
         other => panic!("{other:?}"),
     };
     assert_eq!(stages(1e-3, false), 6);
-    assert_eq!(stages(1e-7, false), 6);
+    assert_eq!(stages(1e-6, false), 6);
+    assert_eq!(stages(2e-7, false), 6);
+    assert_eq!(stages(1e-7, false), 8);
     assert_eq!(stages(1e-9, false), 8);
     assert_eq!(stages(1e-12, false), 8);
     assert_eq!(stages(f64::NAN, false), 6);
