@@ -264,8 +264,8 @@ impl Scheme {
     /// The switch to lobatto8 was at 10⁻⁹ until a held-out model of two masses on a spring of
     /// 10⁴ (`examples/tolerance_sweep`, fourth set) showed lobatto7 and lobatto8 at half of
     /// lobatto6's time at tol 1e-4 and 1e-7: they resolve its fast, lightly damped mode in
-    /// fewer steps. lobatto8's time over lobatto6's on the 38 models of that example (medians
-    /// of 5 alternating runs): at tol 1e-5 median 1.11 (0.50–1.62), at 1e-6 1.07 (0.47–1.46),
+    /// fewer steps. lobatto8's time over lobatto6's on the 37 models of that example (38 runs,
+    /// medians of 5 alternating runs each): at tol 1e-5 median 1.11 (0.50–1.62), at 1e-6 1.07 (0.47–1.46),
     /// at 1e-7 0.99 (0.54–1.46), at 1e-8 0.96 (0.53–1.48); at 1e-4 on the report's models
     /// 1.3–1.6. On the stiff models it takes fewer steps at every tolerance (the van der Pol
     /// at μ = 10⁶: 3522 against 5966 at 1e-7; the over-damped oscillator 30285 against
