@@ -1,4 +1,4 @@
-"""References for tests/held_out_third.rs: the end states (q, p) of the third held-out set of
+"""References for tests/held_out.rs (third set): the end states (q, p) of the third held-out set of
 examples/tolerance_sweep.rs (tests/held_out_models_third.rs). Each model's Lagrangian and
 force are written again here in sympy, not read through forced-vi; sympy forms the
 Euler-Lagrange equations M(q, t) a = L_q + F - L_vq v - L_vt, solves them for the
@@ -123,14 +123,20 @@ def end_state(f, p_f, n, q0, v0, T, H):
     return [float(x) for x in y[:n]] + [float(x) for x in p]
 
 
-for name, model, q0, v0, T, H in MODELS:
-    f, f64, p_f, n = equations(model)
-    coarse = end_state(f, p_f, n, q0, v0, T, H)
-    ref = end_state(f, p_f, n, q0, v0, T, H / 2)
-    y0 = [float(x) for x in q0 + v0]
-    dop = solve_ivp(f64, [0, T], y0, method="DOP853", rtol=1e-13, atol=1e-13)
-    y = dop.y[:, -1]
-    dop_end = list(y[:n]) + [float(x) for x in p_f(T, *y)]
-    dh = max(abs(a - b) for a, b in zip(ref, coarse))
-    ddop = max(abs(a - b) for a, b in zip(ref, dop_end))
-    print(f"{name}: q = {ref[:n]!r}, p = {ref[n:]!r} (H = {H}: within {dh:.1e}; DOP853 within {ddop:.1e})", flush=True)
+def main(models):
+    for name, model, q0, v0, T, H in models:
+        f, f64, p_f, n = equations(model)
+        coarse = end_state(f, p_f, n, q0, v0, T, H)
+        ref = end_state(f, p_f, n, q0, v0, T, H / 2)
+        y0 = [float(x) for x in q0 + v0]
+        dop = solve_ivp(f64, [0, T], y0, method="DOP853", rtol=1e-13, atol=1e-13)
+        y = dop.y[:, -1]
+        dop_end = list(y[:n]) + [float(x) for x in p_f(T, *y)]
+        dh = max(abs(a - b) for a, b in zip(ref, coarse))
+        ddop = max(abs(a - b) for a, b in zip(ref, dop_end))
+        print(f"{name}: q = {ref[:n]!r}, p = {ref[n:]!r} (H = {H}: within {dh:.1e}; "
+              f"DOP853 within {ddop:.1e})", flush=True)
+
+
+if __name__ == "__main__":
+    main(MODELS)

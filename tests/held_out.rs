@@ -14,10 +14,13 @@
 //! run; 2.8 times on the unconstrained five). The example
 //! measures the error in `q` against fixed-step lobatto7 instead, and reads that slope 0.78.
 //! A second test runs the example's third held-out set against references made the same way
-//! from sympy's equations of motion (`scripts/held_out_reference_third.py`).
+//! from sympy's equations of motion (`scripts/held_out_reference_third.py`), and a third a
+//! fifth set of five, of kinds the others lack, made for this file
+//! (`scripts/held_out_reference_fifth.py`).
 //! `cargo test --release -p forced-vi-model-tests --test models_suite held_out`.
 
 use forced_vi::prelude::*;
+use forced_vi::Error;
 
 #[path = "held_out_models.rs"]
 mod held_out_models;
@@ -25,6 +28,11 @@ use held_out_models::{Lorentz, Parametric, Relativistic, SoftKepler, TwoMass};
 #[path = "held_out_models_third.rs"]
 mod held_out_models_third;
 use held_out_models_third::{CaldirolaKanai, CartPendulum, DryFriction, FpuChain, HeavyTop};
+#[path = "held_out_models_fifth.rs"]
+mod held_out_models_fifth;
+use held_out_models_fifth::{
+    FarOscillator, PenningTrap, SwingingAtwood, TriplePendulum, Washboard,
+};
 
 /// A spherical pendulum (unit mass and length) with drag, in Cartesian coordinates with one
 /// constraint.
@@ -66,13 +74,26 @@ fn slope(pts: &[(f64, f64)]) -> Option<f64> {
 fn sweep<M: ForcedLagrangian<N>, const N: usize>(
     name: &'static str,
     model: &M,
+    run: (InitialState<N>, f64),
+    refs: ([f64; N], [f64; N]),
+) -> Vec<Slope> {
+    sweep_to_floor(name, model, run, refs, 0.0)
+}
+
+/// [`sweep`] on a model whose own round-off reaches `floor` in the tolerance's weights: a run
+/// at a tolerance at or below it may also end in [`Error::ToleranceBelowRoundOff`] (a typed
+/// error, keeping its steps), and is left out of the slope.
+fn sweep_to_floor<M: ForcedLagrangian<N>, const N: usize>(
+    name: &'static str,
+    model: &M,
     (init, t_final): (InitialState<N>, f64),
     (q_ref, p_ref): ([f64; N], [f64; N]),
+    floor: f64,
 ) -> Vec<Slope> {
     let mut slopes = Vec::new();
     for s in (3..=8).map(|s| (s < 8).then_some(s)) {
         let label = s.map_or("auto".to_string(), |s| format!("lobatto{s}"));
-        let (mut pts, mut worst) = (Vec::new(), 0.0f64);
+        let (mut pts, mut worst, mut stopped) = (Vec::new(), 0.0f64, 0);
         for k in 3..=12 {
             let tol = 10f64.powi(-k);
             let integ = match s {
@@ -80,9 +101,16 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
                 None => Integrator::auto(model, tol, tol),
             }
             .unwrap();
-            let end = integ
-                .final_state(init, t_final)
-                .unwrap_or_else(|f| panic!("{name} {label} tol {tol:e}: {}", f.error));
+            let end = match integ.final_state(init, t_final) {
+                Ok(end) => end,
+                Err(f)
+                    if tol <= floor && matches!(f.error, Error::ToleranceBelowRoundOff { .. }) =>
+                {
+                    stopped += 1;
+                    continue;
+                }
+                Err(f) => panic!("{name} {label} tol {tol:e}: {}", f.error),
+            };
             // In the tolerance's weights: `atol + rtol |y|` with rtol = atol = tol.
             let pairs = (end.q.iter().zip(&q_ref)).chain(end.p.iter().zip(&p_ref));
             let err = pairs
@@ -96,13 +124,14 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
             worst = worst.max(err / tol);
             // As in the report: runs of at least 4 steps, errors above the references'
             // and the runs' round-off.
-            if end.stats.steps >= 4 && err > 1e-13 {
+            if end.stats.steps >= 4 && err > 1e-13 && tol > floor {
                 pts.push((tol, err));
             }
         }
         let k = slope(&pts);
         eprintln!(
-            "{name} {label}: slope {k:?} over {} runs, largest error {worst:.2} tol",
+            "{name} {label}: slope {k:?} over {} runs, largest error {worst:.2} tol, \
+             {stopped} stopped at the round-off floor",
             pts.len()
         );
         slopes.push((name, label, k));
@@ -287,4 +316,88 @@ fn adaptive_third_held_out_set_ends_within_the_tolerance() {
         slopes.len()
     );
     // Reported, not asserted: see the test's comment.
+}
+
+/// The fifth held-out set (`tests/held_out_models_fifth.rs`: a swinging Atwood machine, a
+/// triple pendulum, a charge in a Penning trap, a particle pulled over a washboard to
+/// x = 300, an oscillator about x = 10⁴), against `scripts/held_out_reference_fifth.py`
+/// (made as the third set's: the macro steps H and H/2 agree to 9e-16 … 4.4e-15, and to
+/// 1.8e-12 on the oscillator about 10⁴; DOP853 at 1e-13 to 3e-14 … 3.6e-12). Every run must
+/// end `Ok` within 10 times the tolerance, except on the oscillator about 10⁴ at tol 1e-11
+/// and 1e-12, which may end in `ToleranceBelowRoundOff`: its force `−(x − 10⁴)` is evaluated
+/// at a position rounded to `10⁴ ε`, and over T = 15 that moves the momentum by up to
+/// `15 · 10⁴ ε ≈ 1.7e-11`, above those tolerances. Slopes printed, not asserted.
+///
+/// Measured when the set was added (2026-11-30), with no change to the controller: every
+/// `Ok` within 1.61 times the tolerance (the far oscillator's lobatto4 at 1e-11; the other
+/// four models within 0.45); lobatto3 at 1e-11 and 1e-12, lobatto4 and 5 at 1e-12 stopped at
+/// the round-off floor on the far oscillator; 28 of 30 slopes in 0.8–1.2. Outside: the far
+/// oscillator's lobatto4, 0.797 (its error in p rises from 0.02 to 0.9 times the tolerance
+/// from 1e-7 to 1e-10, where the estimate's round-off bound in p, `h |∂F/∂x| |x| ε` per
+/// step, is half the tolerance per unit step: it cannot see smaller errors in p, and counts
+/// them as left out), and the washboard's lobatto3, 1.21, whose errors are at most 0.02
+/// times the tolerance.
+#[test]
+fn adaptive_fifth_held_out_set_ends_within_the_tolerance() {
+    let one = |x: f64, v: f64| (InitialState::from_velocity([x], [v]), 15.0);
+    let mut slopes = sweep(
+        "swinging_atwood",
+        &SwingingAtwood {},
+        (InitialState::from_velocity([1.0, 1.0], [0.0, 0.0]), 10.0),
+        (
+            [0.6434717371666131, -6.186844130746715],
+            [-6.6850174633978385, 2.0643268826028445],
+        ),
+    );
+    slopes.extend(sweep(
+        "triple_pendulum",
+        &TriplePendulum {},
+        (
+            InitialState::from_velocity([0.3, -0.2, 0.4], [0.0; 3]),
+            10.0,
+        ),
+        (
+            [
+                0.00781058866720359,
+                0.07748943365172323,
+                -0.02444001838424111,
+            ],
+            [-1.28355666718721, -1.430588028300091, -0.7209515155973334],
+        ),
+    ));
+    slopes.extend(sweep(
+        "penning_trap",
+        &PenningTrap {},
+        (
+            InitialState::from_velocity([1.0, 0.0, 0.5], [0.0, 0.3, 0.0]),
+            15.0,
+        ),
+        (
+            [0.5821381790600767, -0.860767613105349, -0.3239236044392958],
+            [3.3030504176970608, 2.5458913873572424, -0.2801130999396878],
+        ),
+    ));
+    slopes.extend(sweep(
+        "washboard",
+        &Washboard {},
+        one(0.0, 20.0),
+        ([299.80414120072555], [19.989138584048494]),
+    ));
+    slopes.extend(sweep_to_floor(
+        "far_oscillator",
+        &FarOscillator {},
+        one(1.0e4 + 1.0, 0.0),
+        ([9999.662687053267], [-0.31424549137000446]),
+        1.7e-11,
+    ));
+    let outside: Vec<String> = slopes
+        .iter()
+        .filter(|(_, _, k)| !k.is_some_and(|k| (0.8..=1.2).contains(&k)))
+        .map(|(m, s, k)| format!("{m} {s} {k:?}"))
+        .collect();
+    eprintln!(
+        "{} of {} slopes outside 0.8–1.2: {outside:?}",
+        outside.len(),
+        slopes.len()
+    );
 }
