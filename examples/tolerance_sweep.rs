@@ -66,6 +66,10 @@
 //! `4 ε h |A| |x|` with `|A| = 2·10⁴`, about 0.02–0.04 of the tolerance per step at 1e-12,
 //! and the run adds those up plainly (see `forced_vi::control`, "What the estimates leave
 //! out"); the larger steps of the higher orders leave out more per step.
+//! `tests/held_out.rs` checks the fourth set too, in positions and momenta against
+//! references from its equations of motion (`scripts/held_out_reference_fourth.py`); there
+//! the Lennard-Jones pair's momentum ends up to 13.72 times the tolerance off (its flow
+//! amplifies a perturbation of the initial state 112-fold), the wall's 10.35 times (61-fold).
 //!
 //! The fifth held-out set, of `tests/held_out.rs` (a swinging Atwood machine, a triple
 //! pendulum, a charge in a Penning trap, a particle pulled over a washboard to x = 300, an
@@ -296,58 +300,16 @@ use held_out_models::{Lorentz, Parametric, Relativistic, SoftKepler, TwoMass};
 #[path = "../tests/held_out_models_third.rs"]
 mod held_out_models_third;
 use held_out_models_third::{CaldirolaKanai, CartPendulum, DryFriction, FpuChain, HeavyTop};
+// The fourth held-out set (shared with `tests/held_out.rs`).
+#[path = "../tests/held_out_models_fourth.rs"]
+mod held_out_models_fourth;
+use held_out_models_fourth::{LjDimer, LjWall, Quartic, Slow, StiffPair};
+// The fifth held-out set (shared with `tests/held_out.rs`).
 #[path = "../tests/held_out_models_fifth.rs"]
 mod held_out_models_fifth;
 use held_out_models_fifth::{
     FarOscillator, PenningTrap, SwingingAtwood, TriplePendulum, Washboard,
 };
-
-// A fourth held-out set of five, added later on 2026-11-30 with no change to the controller.
-
-/// A particle in a Lennard-Jones well, `1/x¹² − 2/x⁶`, with light drag: a repulsive wall that
-/// steepens like `x⁻¹³` at each turn.
-#[forced_lagrangian(
-    coordinates(x),
-    lagrangian = 0.5 * x_dot * x_dot - (1.0 / x.powi(12) - 2.0 / x.powi(6)),
-    force(x = -0.01 * x_dot)
-)]
-struct LjWall {}
-
-/// Two unit masses joined by a spring of 10⁴ with a light damper, one tied to the origin by a
-/// unit spring: a fast undamped-looking mode (ω ≈ 141) beside a slow one.
-#[forced_lagrangian(
-    coordinates(a, b),
-    lagrangian = 0.5 * (a_dot * a_dot + b_dot * b_dot)
-        - 0.5 * 1.0e4 * (b - a) * (b - a)
-        - 0.5 * a * a,
-    force(a = 0.01 * (b_dot - a_dot), b = -0.01 * (b_dot - a_dot))
-)]
-struct StiffPair {}
-
-/// A slow oscillator (ω = 10⁻³) run over T = 10⁴: steps in the hundreds of time units.
-#[forced_lagrangian(
-    coordinates(x),
-    lagrangian = 0.5 * x_dot * x_dot - 0.5e-6 * x * x,
-    force(x = -1.0e-5 * x_dot)
-)]
-struct Slow {}
-
-/// A purely quartic well with drag: the period grows as the amplitude decays.
-#[forced_lagrangian(
-    coordinates(x),
-    lagrangian = 0.5 * x_dot * x_dot - x * x * x * x,
-    force(x = -0.05 * x_dot)
-)]
-struct Quartic {}
-
-/// A Lennard-Jones pair in the plane with angular momentum and light drag.
-#[forced_lagrangian(
-    coordinates(x, y),
-    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot)
-        - (1.0 / (x * x + y * y).powi(6) - 2.0 / (x * x + y * y).powi(3)),
-    force(x = -0.01 * x_dot, y = -0.01 * y_dot)
-)]
-struct LjDimer {}
 
 /// One sweep's summary.
 struct Sweep {

@@ -16,7 +16,8 @@
 //! A second test runs the example's third held-out set against references made the same way
 //! from sympy's equations of motion (`scripts/held_out_reference_third.py`), and a third a
 //! fifth set of five, of kinds the others lack, made for this file
-//! (`scripts/held_out_reference_fifth.py`).
+//! (`scripts/held_out_reference_fifth.py`); a fourth test, the example's fourth set
+//! (`scripts/held_out_reference_fourth.py`).
 //! `cargo test --release -p forced-vi-model-tests --test models_suite held_out`.
 
 use forced_vi::prelude::*;
@@ -28,6 +29,9 @@ use held_out_models::{Lorentz, Parametric, Relativistic, SoftKepler, TwoMass};
 #[path = "held_out_models_third.rs"]
 mod held_out_models_third;
 use held_out_models_third::{CaldirolaKanai, CartPendulum, DryFriction, FpuChain, HeavyTop};
+#[path = "held_out_models_fourth.rs"]
+mod held_out_models_fourth;
+use held_out_models_fourth::{LjDimer, LjWall, Quartic, Slow, StiffPair};
 #[path = "held_out_models_fifth.rs"]
 mod held_out_models_fifth;
 use held_out_models_fifth::{
@@ -77,18 +81,20 @@ fn sweep<M: ForcedLagrangian<N>, const N: usize>(
     run: (InitialState<N>, f64),
     refs: ([f64; N], [f64; N]),
 ) -> Vec<Slope> {
-    sweep_to_floor(name, model, run, refs, 0.0)
+    sweep_to_floor(name, model, run, refs, (0.0, 1.0))
 }
 
 /// [`sweep`] on a model whose own round-off reaches `floor` in the tolerance's weights: a run
 /// at a tolerance at or below it may also end in [`Error::ToleranceBelowRoundOff`] (a typed
-/// error, keeping its steps), and is left out of the slope.
+/// error, keeping its steps), and is left out of the slope. A model whose flow amplifies
+/// errors by a measured `amp` (the growth over the run of a perturbation of its initial
+/// state) must end within `10 · amp` times the tolerance instead of 10.
 fn sweep_to_floor<M: ForcedLagrangian<N>, const N: usize>(
     name: &'static str,
     model: &M,
     (init, t_final): (InitialState<N>, f64),
     (q_ref, p_ref): ([f64; N], [f64; N]),
-    floor: f64,
+    (floor, amp): (f64, f64),
 ) -> Vec<Slope> {
     let mut slopes = Vec::new();
     for s in (3..=8).map(|s| (s < 8).then_some(s)) {
@@ -117,7 +123,7 @@ fn sweep_to_floor<M: ForcedLagrangian<N>, const N: usize>(
                 .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
                 .fold(0.0, f64::max);
             assert!(
-                err <= 10.0 * tol,
+                err <= 10.0 * amp * tol,
                 "{name} {label} tol {tol:e}: error {:.2} times the tolerance",
                 err / tol
             );
@@ -388,7 +394,84 @@ fn adaptive_fifth_held_out_set_ends_within_the_tolerance() {
         &FarOscillator {},
         one(1.0e4 + 1.0, 0.0),
         ([9999.662687053267], [-0.31424549137000446]),
-        1.7e-11,
+        (1.7e-11, 1.0),
+    ));
+    let outside: Vec<String> = slopes
+        .iter()
+        .filter(|(_, _, k)| !k.is_some_and(|k| (0.8..=1.2).contains(&k)))
+        .map(|(m, s, k)| format!("{m} {s} {k:?}"))
+        .collect();
+    eprintln!(
+        "{} of {} slopes outside 0.8–1.2: {outside:?}",
+        outside.len(),
+        slopes.len()
+    );
+}
+
+/// The fourth held-out set of `examples/tolerance_sweep.rs` (a Lennard-Jones wall, two masses
+/// on a spring of 10⁴, a slow oscillator over T = 10⁴, a quartic well, a Lennard-Jones pair in
+/// the plane), against `scripts/held_out_reference_fourth.py` (made as the third set's: the
+/// macro steps H and H/2 agree to 1.4e-13 and 6.3e-14 on the Lennard-Jones models, and to
+/// 1.2e-14 or better on the others). Every run must end `Ok` within 10 times the tolerance,
+/// with two exceptions:
+/// - the stiff pair at tol 1e-11 and 1e-12 may end in `ToleranceBelowRoundOff`: its spring
+///   force `10⁴ (b − a)` carries the rounding of positions of about 1, `10⁴ ε`, which over
+///   T = 10 moves a momentum by up to 1.1e-11;
+/// - the two Lennard-Jones models amplify errors: their motion is anharmonic, so an error
+///   in energy becomes an error in phase that grows along the run, and at the end of the
+///   run the momentum is the force times that phase error. The script measures how far a
+///   perturbation of 1e-7 of one initial position or velocity grows by T (DOP853): 61 on the
+///   wall and 112 on the pair. Their bound is 10 times the tolerance times that.
+///
+/// Slopes printed, not asserted. Measured when the references were added (2026-11-30): the
+/// wall's runs within 10.35 times the tolerance (lobatto5 at 1e-5, in the momentum; 0.17 of
+/// the tolerance times its amplification), the pair's within 13.72 (lobatto4; 0.12 of it),
+/// the others within 2.24; the stiff pair's lobatto3–5, lobatto7 and `auto` stop at 1e-12 at
+/// the round-off floor; 1 of 30 slopes outside 0.8–1.2, the stiff pair's lobatto3 (0.78,
+/// errors of 1.6 times the tolerance and below). The example, in `q` against fixed-step
+/// lobatto7, read no slope outside and at most 4.67 times the tolerance (the pair): the
+/// momentum's error is the larger here.
+#[test]
+fn adaptive_fourth_held_out_set_ends_within_the_tolerance() {
+    let one = |x: f64, t: f64| (InitialState::from_velocity([x], [0.0]), t);
+    let mut slopes = sweep_to_floor(
+        "lj_wall",
+        &LjWall {},
+        one(1.5, 30.0),
+        ([1.3420436388491186], [0.15460813504247511]),
+        (0.0, 61.0),
+    );
+    slopes.extend(sweep_to_floor(
+        "stiff_pair",
+        &StiffPair {},
+        (InitialState::from_velocity([1.0, 1.01], [0.0, 0.0]), 10.0),
+        (
+            [0.7050011286732906, 0.7128740793869256],
+            [-0.1903768540874266, -0.817000058537266],
+        ),
+        (1.1e-11, 1.0),
+    ));
+    slopes.extend(sweep(
+        "slow",
+        &Slow {},
+        one(1.0, 1.0e4),
+        ([-0.8008011859096379], [0.0005173955823555361]),
+    ));
+    slopes.extend(sweep(
+        "quartic",
+        &Quartic {},
+        one(1.0, 30.0),
+        ([-0.36027451301075686], [-0.4807733656604724]),
+    ));
+    slopes.extend(sweep_to_floor(
+        "lj_dimer",
+        &LjDimer {},
+        (InitialState::from_velocity([1.3, 0.0], [0.0, 0.5]), 30.0),
+        (
+            [0.6312761038772994, 0.9324113041093027],
+            [-0.721487337937929, -0.3028644756987317],
+        ),
+        (0.0, 112.0),
     ));
     let outside: Vec<String> = slopes
         .iter()
