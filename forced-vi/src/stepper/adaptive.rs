@@ -176,7 +176,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         self.estimate = err / per_unit;
                         self.err_last = err;
                         let chosen = self.controller;
-                        self.h_next = self.controller.accept(h, err, self.resolution);
+                        // The error's trend is followed only where the step resolves the
+                        // model's fastest rates (see `crate::control`, "The controller").
+                        let asymptotic =
+                            h * self.backend.force_gain(h) <= Controller::RESOLVED_RATES;
+                        self.h_next = self.controller.accept(h, err, self.resolution, asymptotic);
                         if landing.is_some() && h < planned {
                             // Cut short for an output time: the step the controller planned
                             // stays on offer, and its history stays that of the steps it
