@@ -300,13 +300,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 .chain([self.q0.as_slice()]),
         );
         self.noise_h = h;
-        self.noise_rows.fill(0.0);
+        // In place: an `N × N` temporary would sit on the stack. The first node sets the
+        // rows (a fill with zeros before it, read back at another width, stalled a small
+        // model's step); a NaN counts as nothing, as in a fold with `f64::max` from zero.
+        let rows = self.noise_rows.len().min(N);
+        let noise_rows = &mut self.noise_rows[..rows];
+        let mut first = true;
         for (nj, x) in self.jacs.iter().zip(&self.xs) {
-            // In place: an `N × N` temporary would sit on the stack.
-            for (a, m) in self.noise_rows.iter_mut().enumerate().take(N) {
+            for (a, m) in noise_rows.iter_mut().enumerate() {
                 let row: f64 = (0..N).map(|b| nj.a[(a, b)].abs() * x[b].abs()).sum();
-                *m = m.max(h * row);
+                let v = h * row;
+                if first {
+                    *m = if v > 0.0 { v } else { 0.0 };
+                } else if v > *m {
+                    *m = v;
+                }
             }
+            first = false;
+        }
+        if first {
+            noise_rows.fill(0.0);
         }
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();

@@ -824,9 +824,15 @@ impl<V: Buffer> Iteration<V> {
     ) -> Result<f64, NewtonFailure> {
         self.dz.entries_mut().copy_from_slice(self.r.entries());
         lin.solve_in_place(&mut self.dz);
-        let dz = self.dz.entries_mut();
-        dz.iter_mut().for_each(|x| *x = -*x);
-        let full = max_norm(dz);
+        // Negated and measured in one pass (NaN propagated, as in `max_norm`).
+        let (mut full, mut nan) = (0.0f64, false);
+        for x in self.dz.entries_mut() {
+            *x = -*x;
+            let a = x.abs();
+            full = if a > full { a } else { full };
+            nan |= a.is_nan();
+        }
+        let full = if nan { f64::NAN } else { full };
         if !full.is_finite() {
             return Err(NewtonFailure::NonFinite);
         }

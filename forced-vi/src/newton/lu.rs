@@ -234,33 +234,51 @@ fn eliminate(
 }
 
 /// The substitutions of [`DenseLu::solve_in_place`] for order `K`, known at compile time
-/// (the columns as arrays, as in [`factor_in_place`]; the operations of [`substitute`]).
+/// (the columns as arrays, as in [`factor_in_place`]; the operations of [`substitute`]: a
+/// product with each pivot's reciprocal, not a division, so that the reciprocals are taken
+/// off the substitution's chain). Coupled van der Pol at h = 0.01, final state: lobatto4 437 -> 419 and
+/// lobatto5 527 -> 506 ns per step with this and the local array below (medians,
+/// interleaved).
 #[inline(never)]
 fn solve_fixed<const K: usize>(m: &[f64], piv: &[usize], x: &mut [f64]) {
     let (cols, _) = m.as_chunks::<K>();
     let (Some(cols), Some(piv), Some(x)) = (cols.get(..K), piv.get(..K), x.get_mut(..K)) else {
         return substitute(K, m, piv, x);
     };
+    // In a local array, which the unrolled loops keep in registers: updated in place in
+    // the caller's buffer, each entry was stored and loaded again once per column.
+    let mut y = [0.0; K];
+    y.copy_from_slice(x);
     for (k, &p) in piv.iter().enumerate() {
-        x.swap(k, p);
+        if let Some(&v) = y.get(p) {
+            y[p] = y[k];
+            y[k] = v;
+        }
     }
     for j in 0..K {
-        let xj = x[j];
-        if xj != 0.0 {
+        let yj = y[j];
+        if yj != 0.0 {
             for i in j + 1..K {
-                x[i] -= cols[j][i] * xj;
+                y[i] -= cols[j][i] * yj;
             }
         }
+    }
+    // The pivots' reciprocals first, independent of each other, so that no division
+    // waits on the substitution's chain (the divisions were a third of the solve).
+    let mut inv = [0.0; K];
+    for (j, (d, col)) in inv.iter_mut().zip(cols).enumerate() {
+        *d = 1.0 / col[j];
     }
     for j in (0..K).rev() {
-        x[j] /= cols[j][j];
-        let xj = x[j];
-        if xj != 0.0 {
+        y[j] *= inv[j];
+        let yj = y[j];
+        if yj != 0.0 {
             for i in 0..j {
-                x[i] -= cols[j][i] * xj;
+                y[i] -= cols[j][i] * yj;
             }
         }
     }
+    x.copy_from_slice(&y);
 }
 
 /// [`DenseLu::solve_in_place`]'s substitutions for any order.
@@ -283,7 +301,8 @@ fn substitute(n: usize, m: &[f64], piv: &[usize], x: &mut [f64]) {
         }
     }
     for j in (0..n).rev() {
-        x[j] /= m[j + j * n];
+        // A product with the pivot's reciprocal, as in [`solve_fixed`] (bit for bit).
+        x[j] *= 1.0 / m[j + j * n];
         let xj = x[j];
         if xj != 0.0 {
             for (xi, u) in x[..j].iter_mut().zip(&m[j * n..j * n + j]) {
