@@ -202,8 +202,8 @@ impl DenseLinear {
         let out = &mut self.row_max[..];
         // By slices of the column-major storage (nalgebra's column iterator cost four times
         // as many instructions). The first column sets the maxima: a fill with zeros before
-        // it, read back at another width, stalled the small model's step (a tenth of
-        // lobatto3's on coupled van der Pol).
+        // it, read back at another width, stalled (in sampled profiles of lobatto3 on
+        // coupled van der Pol, this scan fell from 5 % of the step's time to 2 %).
         let mut cols = self.jac.as_slice().chunks_exact(rows.max(1));
         if let Some(first) = cols.next() {
             for (o, &x) in out.iter_mut().zip(first) {
