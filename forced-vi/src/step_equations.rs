@@ -291,24 +291,33 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 None => self.jacs.push(nj),
             }
         }
-        self.noise = crate::newton::force_round_off(
-            h,
-            self.jacs.iter().map(|nj| nj.a.as_slice()),
-            self.xs
-                .iter()
-                .map(|x| x.as_slice())
-                .chain([self.q0.as_slice()]),
-        );
-        self.noise_h = h;
-        // In place: an `N × N` temporary would sit on the stack. The first node sets the
-        // rows (a fill with zeros before it, read back at another width, stalled a small
-        // model's step); a NaN counts as nothing, as in a fold with `f64::max` from zero.
-        let rows = self.noise_rows.len().min(N);
-        let noise_rows = &mut self.noise_rows[..rows];
+        // `h |A| |x|` ([`crate::newton::force_round_off`]) and the same per row, in one pass
+        // over the blocks `A`. In place: an `N × N` temporary would sit on the stack. The
+        // first node sets the rows (a fill with zeros before it, read back at another width,
+        // stalled); a NaN counts as nothing, as in a fold with `f64::max` from zero.
+        let mut x_max = 0.0f64;
+        for x in self.xs.iter().chain([&self.q0]) {
+            for v in x.iter() {
+                let a = v.abs();
+                x_max = if a > x_max { a } else { x_max };
+            }
+        }
+        let mut a_max = 0.0f64;
         let mut first = true;
-        for (nj, x) in self.jacs.iter().zip(&self.xs) {
-            for (a, m) in noise_rows.iter_mut().enumerate() {
-                let row: f64 = (0..N).map(|b| nj.a[(a, b)].abs() * x[b].abs()).sum();
+        for (i, nj) in self.jacs.iter().enumerate() {
+            let x = self.xs.get(i);
+            for a in 0..N {
+                let mut row = 0.0;
+                for b in 0..N {
+                    let e = nj.a[(a, b)].abs();
+                    a_max = if e > a_max { e } else { a_max };
+                    if let Some(x) = x {
+                        row += e * x[b].abs();
+                    }
+                }
+                let (Some(m), Some(_)) = (self.noise_rows.get_mut(a), x) else {
+                    continue;
+                };
                 let v = h * row;
                 if first {
                     *m = if v > 0.0 { v } else { 0.0 };
@@ -316,11 +325,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                     *m = v;
                 }
             }
-            first = false;
+            first &= x.is_none();
         }
         if first {
-            noise_rows.fill(0.0);
+            self.noise_rows.fill(0.0);
         }
+        self.noise = h * a_max * x_max;
+        self.noise_h = h;
         let constant_mass = M::STRUCTURE.constant_mass;
         let rows = jac.nrows();
         if constant_mass {
