@@ -234,11 +234,13 @@ fn eliminate(
 }
 
 /// The substitutions of [`DenseLu::solve_in_place`] for order `K`, known at compile time
-/// (the columns as arrays, as in [`factor_in_place`]; the operations of [`substitute`]: a
-/// product with each pivot's reciprocal, not a division, so that the reciprocals are taken
-/// off the substitution's chain). In sampled profiles of lobatto5 on coupled van der Pol,
-/// the divisions were a third of this function's time; whole runs moved by less than this
-/// machine's noise.
+/// (the columns as arrays, as in [`factor_in_place`]; the operations of [`substitute`]).
+/// Divisions by the pivots, not products with their reciprocals: those were about a third
+/// of this function's time in sampled profiles of lobatto5 on coupled van der Pol, but whole
+/// runs moved by less than this machine's noise, and the extra rounding turned three
+/// adaptive runs of the stability report's scaled van der Pol (μ = 10⁶, lobatto4 at tol 1
+/// and 1e-2, lobatto5 at 1e-6), which end `Ok` near the step-size floor, into
+/// `StepSizeTooSmall` and `MaxStepsReached`.
 #[inline(never)]
 fn solve_fixed<const K: usize>(m: &[f64], piv: &[usize], x: &mut [f64]) {
     let (cols, _) = m.as_chunks::<K>();
@@ -263,14 +265,8 @@ fn solve_fixed<const K: usize>(m: &[f64], piv: &[usize], x: &mut [f64]) {
             }
         }
     }
-    // The pivots' reciprocals first, independent of each other, so that no division
-    // waits on the substitution's chain (the divisions were a third of the solve).
-    let mut inv = [0.0; K];
-    for (j, (d, col)) in inv.iter_mut().zip(cols).enumerate() {
-        *d = 1.0 / col[j];
-    }
     for j in (0..K).rev() {
-        y[j] *= inv[j];
+        y[j] /= cols[j][j];
         let yj = y[j];
         if yj != 0.0 {
             for i in 0..j {
@@ -301,8 +297,7 @@ fn substitute(n: usize, m: &[f64], piv: &[usize], x: &mut [f64]) {
         }
     }
     for j in (0..n).rev() {
-        // A product with the pivot's reciprocal, as in [`solve_fixed`] (bit for bit).
-        x[j] *= 1.0 / m[j + j * n];
+        x[j] /= m[j + j * n];
         let xj = x[j];
         if xj != 0.0 {
             for (xi, u) in x[..j].iter_mut().zip(&m[j * n..j * n + j]) {
