@@ -200,42 +200,18 @@ impl DenseLinear {
             self.row_max.resize(rows, 0.0);
         }
         let (m, out) = (self.jac.as_slice(), &mut self.row_max[..]);
-        // Orders up to 16 by columns as arrays of a size known at compile time, as the LU
-        // does (the general loop's slicing cost about 200 instructions for a 4 × 4 Jacobian).
-        macro_rules! fixed {
-            ($($k:literal)*) => {
-                match rows {
-                    $($k => scan_rows_fixed::<$k>(m, out),)*
-                    _ => scan_rows_general(rows, m, out),
-                }
-            };
-        }
-        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        // Not by columns as arrays of a size known at compile time, as the LU: that took 77
+        // instructions instead of 209 for a 4 × 4 Jacobian, but lobatto3 on coupled van der
+        // Pol (h = 0.01) took 337 instead of 308 ns per step (medians, interleaved runs).
+        scan_rows_general(rows, m, out)
     }
 }
 
-/// [`DenseLinear::scan_rows`] for order `K`: the first column sets the maxima (a fill with
-/// zeros before it, read back at another width, stalled: in sampled profiles of lobatto3
-/// on coupled van der Pol, the scan fell from 5 % of the step's time to 2 %); a NaN entry
-/// counts as nothing.
-fn scan_rows_fixed<const K: usize>(m: &[f64], out: &mut [f64]) -> f64 {
-    let (cols, _) = m.as_chunks::<K>();
-    let (Some(cols), Some(out)) = (cols.get(..K), out.get_mut(..K)) else {
-        return scan_rows_general(K, m, out);
-    };
-    let mut best = [0.0f64; K];
-    for col in cols {
-        for (o, &x) in best.iter_mut().zip(col) {
-            let a = x.abs();
-            *o = if a > *o { a } else { *o };
-        }
-    }
-    out.copy_from_slice(&best);
-    best.iter().fold(0.0f64, |m, &x| if x > m { x } else { m })
-}
-
-/// [`DenseLinear::scan_rows`] for any order, by slices of the column-major storage
-/// (nalgebra's column iterator cost four times as many instructions).
+/// [`DenseLinear::scan_rows`], by slices of the column-major storage (nalgebra's column
+/// iterator cost four times as many instructions). The first column sets the maxima: a
+/// fill with zeros before it, read back at another width, stalled (in sampled profiles of
+/// lobatto3 on coupled van der Pol, the scan fell from 5 % of the step's time to 2 %). A
+/// NaN entry counts as nothing.
 fn scan_rows_general(rows: usize, m: &[f64], out: &mut [f64]) -> f64 {
     let mut cols = m.chunks_exact(rows.max(1));
     if let Some(first) = cols.next() {
