@@ -29,7 +29,7 @@ impl DenseLu {
     /// Factors `a`. Fails if a pivot is zero or negligible against the scale of its own
     /// row (a scale-invariant test: rows of very different sizes are not singular).
     ///
-    /// Orders up to 16 run a copy of the same elimination compiled for their size
+    /// Orders up to 24 run a copy of the same elimination compiled for their size
     /// (the loops unrolled, the bounds known). Its column updates run over every row and
     /// subtract exact zeros above the pivot, which leaves those entries as they were: the
     /// factors are those of the general loop, bit for bit but for the sign of a zero.
@@ -54,7 +54,7 @@ impl DenseLu {
                 }
             };
         }
-        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24)
     }
 
     /// Solves `A x = b` in place with the last factors.
@@ -69,7 +69,7 @@ impl DenseLu {
                 }
             };
         }
-        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24)
     }
 }
 
@@ -364,7 +364,7 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
         };
-        for n in 1..=17 {
+        for n in 1..=25 {
             for _ in 0..20 {
                 let a = DMatrix::from_fn(n, n, |_, _| next());
                 let b = DVector::from_fn(n, |_, _| next());
@@ -384,7 +384,7 @@ mod tests {
                         }
                     };
                 }
-                let plain = body!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16);
+                let plain = body!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24);
                 assert_eq!(fixed.is_ok(), general.is_ok(), "n = {n}");
                 assert_eq!(plain.is_ok(), general.is_ok(), "n = {n}");
                 if fixed.is_err() {
@@ -408,7 +408,7 @@ mod tests {
     /// general loop alike.
     #[test]
     fn non_finite_entries_are_refused_at_every_order() {
-        for n in [1, 2, 6, 12, 16, 17, 20] {
+        for n in [1, 2, 6, 12, 16, 17, 20, 24, 25, 30] {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
                 let mut a = DMatrix::<f64>::identity(n, n);
                 a[(n - 1, n / 2)] = bad;
