@@ -38,10 +38,38 @@ fn nodes_and_weights_are_accurate_up_to_the_cap() {
 }
 
 #[test]
-fn predictor_extrapolates_only_while_its_lebesgue_constant_is_small() {
+fn predictor_extrapolates_within_its_lebesgue_bound_at_every_stage_count() {
     for s in 2..=MAX_STAGES {
         let sch = Scheme::lobatto(s).unwrap();
-        assert_eq!(sch.extrapolates(), s <= 9, "s = {s}");
+        assert!(sch.extrapolates(), "s = {s}");
+        // All the control points up to s = 9 (constant 6.9e5), then a subset: nine points.
+        let degree = if s <= 9 { s - 1 } else { 8 };
+        assert_eq!(sch.predictor_degree(), degree, "s = {s}");
+        let lebesgue = (0..s)
+            .map(|j| sch.extrapolation_row(j).iter().map(|x| x.abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        assert!(lebesgue <= MAX_PREDICTOR_LEBESGUE, "s = {s}: {lebesgue:e}");
+        // The table's rows and the basis at 1 + d_j agree; each reproduces the polynomials
+        // of the predictor's degree (exactly the degree-`degree` monomial at the points), and
+        // sums to 1.
+        let mut basis = vec![0.0; s];
+        for j in 0..s {
+            let tau = 1.0 + sch.d()[j];
+            sch.predictor_basis_at(tau, &mut basis);
+            let row = sch.extrapolation_row(j);
+            for (a, b) in basis.iter().zip(row) {
+                assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()), "s = {s}, j = {j}");
+            }
+            let sum: f64 = row.iter().sum();
+            assert!((sum - 1.0).abs() <= 1e-8, "s = {s}: {sum}");
+            let mono: f64 = row
+                .iter()
+                .zip(sch.d())
+                .map(|(l, x)| l * x.powi(degree as i32))
+                .sum();
+            let want = tau.powi(degree as i32);
+            assert!((mono - want).abs() <= 1e-7 * want, "s = {s}: {mono} {want}");
+        }
     }
 }
 

@@ -1,5 +1,6 @@
 //! The predictor: the previous step's polynomial extrapolated to the new step (rescaled
-//! when `h` changes), or a straight line along `v` on a first step.
+//! when `h` changes; above nine stages the polynomial through a subset of its control
+//! points, see `Scheme::predictor_degree`), or a straight line along `v` on a first step.
 //!
 //! The extrapolation is also corrected by its own error. That error, the solved increments
 //! less the extrapolated ones, is `O(h^(s+1))` and, over steps of one size, a smooth function
@@ -72,7 +73,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let row: &[f64] = if same {
                 sch.extrapolation_row(j)
             } else {
-                sch.basis_at(1.0 + dj * h / st.h_prev, basis);
+                sch.predictor_basis_at(1.0 + dj * h / st.h_prev, basis);
                 basis
             };
             for a in 0..N {
