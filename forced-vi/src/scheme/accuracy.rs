@@ -46,12 +46,16 @@ fn predictor_extrapolates_within_its_lebesgue_bound_at_every_stage_count() {
         let degree = if s <= 9 { s - 1 } else { 8 };
         assert_eq!(sch.predictor_degree(), degree, "s = {s}");
         let lebesgue = (0..s)
-            .map(|j| sch.extrapolation_row(j).iter().map(|x| x.abs()).sum::<f64>())
+            .map(|j| {
+                sch.extrapolation_row(j)
+                    .iter()
+                    .map(|x| x.abs())
+                    .sum::<f64>()
+            })
             .fold(0.0, f64::max);
         assert!(lebesgue <= MAX_PREDICTOR_LEBESGUE, "s = {s}: {lebesgue:e}");
-        // The table's rows and the basis at 1 + d_j agree; each reproduces the polynomials
-        // of the predictor's degree (exactly the degree-`degree` monomial at the points), and
-        // sums to 1.
+        // The table's rows and the basis at 1 + d_j agree; each row sums to 1 and
+        // extrapolates the monomial of the predictor's degree exactly.
         let mut basis = vec![0.0; s];
         for j in 0..s {
             let tau = 1.0 + sch.d()[j];
