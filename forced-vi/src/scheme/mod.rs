@@ -610,8 +610,10 @@ impl Scheme {
         self.t.extrapolates
     }
 
-    /// The degree of the polynomial the predictor extrapolates: `s − 1` up to s = 9, 8 above
-    /// (a subset of the control points; see [`MAX_PREDICTOR_LEBESGUE`]).
+    /// The degree of the polynomial the predictor extrapolates from the last step to the
+    /// next: `s − 1` up to s = 9, and 8 above, where it goes through nine of the control
+    /// points (the whole polynomial's extrapolation would multiply the last step's round-off
+    /// by more than 10⁶).
     pub fn predictor_degree(&self) -> usize {
         self.t.pred_points.len().saturating_sub(1)
     }
