@@ -87,3 +87,37 @@ fn high_order_lobatto6_to_8_converge_at_their_orders_on_a_closed_form_oscillator
         );
     }
 }
+
+/// Above nine stages the predictor extrapolates the polynomial through nine of the last
+/// step's control points (`Scheme::predictor_degree`), not a straight line along the
+/// velocity: on the coupled van der Pol oscillators at h = 0.1 the guess is then close
+/// enough for the last step's factors, about one Newton iteration per step (measured 1.12 to
+/// 1.16 for lobatto10 to 20; 2.33 to 2.51 with the straight line), and the end state is the
+/// same to round-off.
+#[test]
+fn high_order_predictor_keeps_newton_short_above_nine_stages() {
+    use forced_vi_scenes::models::CoupledVanDerPol;
+    let model = CoupledVanDerPol::PAPER;
+    let init = InitialState::from_velocity([-0.5, -0.25], [0.0, 4.0]);
+    let reference = Integrator::new(&model, Scheme::lobatto(14).expect("scheme"), 0.01)
+        .expect("integrator")
+        .final_state(init, 10.0)
+        .expect("reference run")
+        .q;
+    for s in [10, 12, 16, 20] {
+        let scheme = Scheme::lobatto(s).expect("scheme");
+        assert_eq!(scheme.predictor_degree(), 8, "lobatto{s}");
+        let end = Integrator::new(&model, scheme, 0.1)
+            .expect("integrator")
+            .final_state(init, 10.0)
+            .expect("run");
+        let per_step = end.stats.newton_iterations as f64 / end.stats.steps as f64;
+        let err = (end.q - reference).abs().max();
+        eprintln!("lobatto{s}: {per_step:.2} Newton iterations per step, error {err:.1e}");
+        assert!(
+            per_step <= 1.3,
+            "lobatto{s}: {per_step} iterations per step"
+        );
+        assert!(err <= 1e-12, "lobatto{s}: error {err:e}");
+    }
+}
