@@ -83,7 +83,9 @@ pub fn crate_source(models: usize) -> String {
     src
 }
 
-fn run_cargo(dir: &Path, target: &Path) -> Result<f64, String> {
+/// Runs `cargo build --release` in `dir` with `target` as its target directory; returns its
+/// wall time in seconds.
+pub(super) fn run_cargo(dir: &Path, target: &Path) -> Result<f64, String> {
     let t0 = Instant::now();
     let out = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
         .args(["build", "--release", "--offline", "--quiet"])

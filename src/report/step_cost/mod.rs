@@ -24,7 +24,9 @@
 //!   record of a `output::each_step` run (so the stepper's one-off buffers are excluded), divided
 //!   by the steps.
 //! - compile time of a crate with one model against one with ten, and the peak RSS of a long
-//!   streamed run (full run only for the compile time).
+//!   streamed run (full run only for the compile time);
+//! - the first answer on a new large model: a crate with a 256-coordinate chain built and
+//!   run, against heyoka's committed JIT build and run ([`first_run`]; full run only).
 //!
 //! # The study
 //!
@@ -42,6 +44,7 @@ use crate::report::{readme, Options, ReportError};
 pub mod compile;
 pub mod ensemble;
 mod figures;
+pub mod first_run;
 pub mod measure;
 pub mod rows;
 pub mod scaling;
@@ -96,6 +99,12 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
         eprintln!("step-cost: compile times …");
         compile::compile_times()
     };
+    let first_run = if opts.quick {
+        Err("not measured in --quick (it builds a crate; see the full run)".to_string())
+    } else {
+        eprintln!("step-cost: the first answer on a new model, against heyoka …");
+        first_run::measure()
+    };
     let records: Vec<StepCostRecord> = rows.iter().map(Into::into).collect();
     write_csv(&opts.out.join("step_cost.csv"), &records)?;
     let svg = opts.out.join("step_cost_scaling.svg");
@@ -106,6 +115,7 @@ pub fn run(opts: &Options, counter: Option<AllocCounter>) -> Result<Summary, Rep
         exponents,
         peaks,
         compile,
+        first_run,
         memory,
         same_iterations,
         ensemble,

@@ -72,6 +72,8 @@ pub struct Summary {
     pub peaks: Vec<PeakRss>,
     /// The compile-time measurement, or why there is none.
     pub compile: Result<CompileTimes, String>,
+    /// The first answer on a new large model, against heyoka, or why it was not measured.
+    pub first_run: Result<super::first_run::FirstRun, String>,
     /// The streamed-memory measurement.
     pub memory: Memory,
     /// Whether the hand-written and generated runs took the same Newton iterations.

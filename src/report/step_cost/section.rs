@@ -35,6 +35,7 @@ pub fn markdown_section(s: &Summary, quick: bool, plot: Option<&str>) -> String 
     slimplectic(&mut md, &paper);
     md.push_str(&super::scaling_section::markdown_section(s, plot));
     compile_and_memory(&mut md, s);
+    super::first_run::markdown(&mut md, &s.first_run);
     md
 }
 
