@@ -73,6 +73,11 @@ pub(crate) struct SparseStep<'a> {
     constant_mass: bool,
     e_part: Vec<f64>,
     e_built: bool,
+    /// The largest row sums of `|A|` and `|B|` over the node blocks ([`Self::force_gain`]),
+    /// made on the first call after the blocks change: an adaptive step asks twice, and the
+    /// blocks change only with the Jacobian (on a 256-coordinate chain, adaptive lobatto4,
+    /// the scan was 4.5 % of the run's instructions with 90 scans for 7 Jacobians).
+    gain: std::cell::Cell<Option<(f64, f64)>>,
 }
 
 impl<'a> SparseStep<'a> {
@@ -90,6 +95,9 @@ impl<'a> SparseStep<'a> {
     /// `h |A| + |B|` over the node blocks of the last Jacobian, in row sums (see
     /// [`crate::backend::StepBackend::force_gain`]).
     pub(crate) fn force_gain(&self, h: f64) -> f64 {
+        if let Some((a, b)) = self.gain.get() {
+            return h * a + b;
+        }
         // The blocks' values are stored row by row, in the pattern's compressed rows.
         let largest_row = |vals: &[f64]| {
             let (mut best, mut k) = (0.0f64, 0);
@@ -106,6 +114,7 @@ impl<'a> SparseStep<'a> {
         let (a, b) = self.blocks.iter().fold((0.0f64, 0.0f64), |(a, b), blk| {
             (a.max(largest_row(&blk.a)), b.max(largest_row(&blk.b)))
         });
+        self.gain.set(Some((a, b)));
         h * a + b
     }
 
@@ -150,6 +159,7 @@ impl<'a> SparseStep<'a> {
             e_part: vec![0.0; if constant_mass { values_len } else { 0 }],
             constant_mass,
             e_built: false,
+            gain: std::cell::Cell::new(None),
         }
     }
 
@@ -239,6 +249,9 @@ impl<'a> SparseStep<'a> {
     /// Evaluates the node gradients (and, with `blocks`, the node blocks) at the nodes.
     fn eval_nodes(&mut self, blocks: bool) -> Result<(), NewtonFailure> {
         let n = self.n;
+        if blocks {
+            self.gain.set(None);
+        }
         for i in 0..self.scheme.quadrature_nodes() {
             let t = self.node_time(i);
             let range = i * n..(i + 1) * n;
