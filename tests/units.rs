@@ -794,6 +794,78 @@ mod report_step_cost {
         }
         assert!(compile::crate_source(1).contains("M0 { eps: 0.5, rho: 0.5, lambda: 0.5 }"));
     }
+
+    mod first_answer {
+        use forced_vi_scenes::report::step_cost::first_run::*;
+        fn root() -> std::path::PathBuf {
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        }
+
+        #[test]
+        fn the_committed_heyoka_runs_and_reference_are_read() {
+            let (runs, note) =
+                heyoka_runs(&root().join("data/baselines/heyoka_first_run.csv")).expect("runs");
+            assert!(note.contains("heyoka_first_run.py"), "{note}");
+            for tol in [1e-6, 1e-9] {
+                let modes: Vec<&str> = (runs.iter())
+                    .filter(|(t, _)| *t == tol)
+                    .map(|(_, r)| r.mode.as_str())
+                    .collect();
+                assert_eq!(modes, ["default", "compact"], "tol {tol:e}");
+            }
+            for (tol, r) in &runs {
+                assert!(r.jit > 0.0 && r.run > 0.0, "{tol:e} {r:?}");
+                assert!(r.error > 0.0 && r.error < *tol, "{tol:e} {r:?}");
+            }
+            let q = reference(&root().join("data/reference/sine_gordon_chain_256.csv"))
+                .expect("reference");
+            assert_eq!(q.len(), N);
+            assert!(q.iter().all(|x| x.is_finite()) && q.iter().any(|x| x.abs() > 1e-3));
+        }
+
+        #[test]
+        fn the_table_adds_build_and_run_and_says_why_a_run_is_missing() {
+            let heyoka = vec![HeyokaRun {
+                mode: "compact".into(),
+                jit: 0.2,
+                run: 0.001,
+                error: 1e-8,
+            }];
+            let forced = ForcedRun {
+                tol: 1e-7,
+                scheme: "lobatto4".into(),
+                steps: 45,
+                process: 0.02,
+                inner: 0.015,
+                error: 3e-9,
+            };
+            let rows = vec![
+                FirstRow {
+                    tol: 1e-6,
+                    heyoka: heyoka.clone(),
+                    forced: Some(forced),
+                },
+                FirstRow {
+                    tol: 1e-9,
+                    heyoka,
+                    forced: None,
+                },
+            ];
+            let f = FirstRun {
+                build: 5.0,
+                rows,
+                note: "n".into(),
+            };
+            let mut md = String::new();
+            markdown(&mut md, &Ok(f));
+            assert!(md.contains("200.0 ms + 1.0 ms = **201.0 ms**"), "{md}");
+            assert!(md.contains("5.0 s + 20.0 ms = **5.0 s**"), "{md}");
+            assert!(md.contains("no tolerance of the ladder reached it"), "{md}");
+            let mut md = String::new();
+            markdown(&mut md, &Err("why".into()));
+            assert!(md.contains("Not measured: why."), "{md}");
+        }
+    }
 }
 
 mod report_equal_error {

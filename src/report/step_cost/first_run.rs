@@ -19,7 +19,7 @@ use super::compile::run_cargo;
 use crate::report::timing::median;
 
 /// The number of coordinates.
-const N: usize = 256;
+pub const N: usize = 256;
 
 /// forced-vi's tolerance ladder.
 const LADDER: [f64; 8] = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13];
@@ -124,8 +124,9 @@ fn read(path: &Path) -> Result<String, String> {
     std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// heyoka's runs, by tolerance (in the file's order), and the file's note.
-fn heyoka_runs(path: &Path) -> Result<(Vec<(f64, HeyokaRun)>, String), String> {
+/// heyoka's runs in `path` (`data/baselines/heyoka_first_run.csv`), each with its tolerance,
+/// in the file's order, and the file's note.
+pub fn heyoka_runs(path: &Path) -> Result<(Vec<(f64, HeyokaRun)>, String), String> {
     let text = read(path)?;
     let mut note = String::new();
     let mut runs = Vec::new();
@@ -157,8 +158,8 @@ fn heyoka_runs(path: &Path) -> Result<(Vec<(f64, HeyokaRun)>, String), String> {
     Ok((runs, note))
 }
 
-/// The reference final positions.
-fn reference(path: &Path) -> Result<Vec<f64>, String> {
+/// The reference final positions in `path` (`data/reference/sine_gordon_chain_256.csv`).
+pub fn reference(path: &Path) -> Result<Vec<f64>, String> {
     let q: Vec<f64> = read(path)?
         .lines()
         .skip(1)
@@ -406,79 +407,5 @@ pub fn markdown(md: &mut String, first: &Result<FirstRun, String>) {
              forced-vi's slower part, by the factors in parentheses.",
             said.join("; ")
         );
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn root() -> PathBuf {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-    }
-
-    #[test]
-    fn the_committed_heyoka_runs_and_reference_are_read() {
-        let (runs, note) =
-            heyoka_runs(&root().join("data/baselines/heyoka_first_run.csv")).expect("runs");
-        assert!(note.contains("heyoka_first_run.py"), "{note}");
-        for tol in [1e-6, 1e-9] {
-            let modes: Vec<&str> = (runs.iter())
-                .filter(|(t, _)| *t == tol)
-                .map(|(_, r)| r.mode.as_str())
-                .collect();
-            assert_eq!(modes, ["default", "compact"], "tol {tol:e}");
-        }
-        for (tol, r) in &runs {
-            assert!(r.jit > 0.0 && r.run > 0.0, "{tol:e} {r:?}");
-            assert!(r.error > 0.0 && r.error < *tol, "{tol:e} {r:?}");
-        }
-        let q =
-            reference(&root().join("data/reference/sine_gordon_chain_256.csv")).expect("reference");
-        assert_eq!(q.len(), N);
-        assert!(q.iter().all(|x| x.is_finite()) && q.iter().any(|x| x.abs() > 1e-3));
-    }
-
-    #[test]
-    fn the_table_adds_build_and_run_and_says_why_a_run_is_missing() {
-        let heyoka = vec![HeyokaRun {
-            mode: "compact".into(),
-            jit: 0.2,
-            run: 0.001,
-            error: 1e-8,
-        }];
-        let forced = ForcedRun {
-            tol: 1e-7,
-            scheme: "lobatto4".into(),
-            steps: 45,
-            process: 0.02,
-            inner: 0.015,
-            error: 3e-9,
-        };
-        let rows = vec![
-            FirstRow {
-                tol: 1e-6,
-                heyoka: heyoka.clone(),
-                forced: Some(forced),
-            },
-            FirstRow {
-                tol: 1e-9,
-                heyoka,
-                forced: None,
-            },
-        ];
-        let f = FirstRun {
-            build: 5.0,
-            rows,
-            note: "n".into(),
-        };
-        let mut md = String::new();
-        markdown(&mut md, &Ok(f));
-        assert!(md.contains("200.0 ms + 1.0 ms = **201.0 ms**"), "{md}");
-        assert!(md.contains("5.0 s + 20.0 ms = **5.0 s**"), "{md}");
-        assert!(md.contains("no tolerance of the ladder reached it"), "{md}");
-        let mut md = String::new();
-        markdown(&mut md, &Err("why".into()));
-        assert!(md.contains("Not measured: why."), "{md}");
     }
 }
