@@ -104,26 +104,34 @@ pub(super) fn run_cargo(dir: &Path, target: &Path) -> Result<f64, String> {
     Ok(t0.elapsed().as_secs_f64())
 }
 
+/// Makes the throw-away crate `name` in `target/step_cost_compile/name` (its manifest, with
+/// `forced-vi` by path, and the workspace's lock file) and returns its folder and the
+/// shared target folder.
+pub(super) fn throwaway_crate(name: &str) -> Result<(PathBuf, PathBuf), String> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let base = root.join("target").join("step_cost_compile");
+    let dir = base.join(name);
+    let src = dir.join("src");
+    std::fs::create_dir_all(&src).map_err(|e| format!("{}: {e}", src.display()))?;
+    let manifest = format!(
+        "[package]\nname = \"{name}\"\nversion = \"0.0.0\"\nedition = \"2021\"\npublish = false\n\n[dependencies]\nforced-vi = {{ path = {:?} }}\n\n[workspace]\n",
+        root.join("forced-vi").display().to_string()
+    );
+    std::fs::write(dir.join("Cargo.toml"), manifest).map_err(|e| e.to_string())?;
+    if !dir.join("Cargo.lock").exists() {
+        std::fs::copy(root.join("Cargo.lock"), dir.join("Cargo.lock"))
+            .map_err(|e| e.to_string())?;
+    }
+    Ok((dir, base.join("target")))
+}
+
 /// Builds a one-model and a ten-model crate under `target/step_cost_compile/` (dependencies
 /// first, untimed), then times rebuilds of each crate alone.
 pub fn compile_times() -> Result<CompileTimes, String> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let base = root.join("target").join("step_cost_compile");
-    let target = base.join("target");
-    let lock = root.join("Cargo.lock");
     let mut times = Vec::new();
     for models in [1usize, 10] {
-        let dir = base.join(format!("models{models}"));
+        let (dir, target) = throwaway_crate(&format!("models{models}"))?;
         let src = dir.join("src");
-        std::fs::create_dir_all(&src).map_err(|e| format!("{}: {e}", src.display()))?;
-        let manifest = format!(
-            "[package]\nname = \"models{models}\"\nversion = \"0.0.0\"\nedition = \"2021\"\npublish = false\n\n[dependencies]\nforced-vi = {{ path = {:?} }}\n\n[workspace]\n",
-            root.join("forced-vi").display().to_string()
-        );
-        std::fs::write(dir.join("Cargo.toml"), manifest).map_err(|e| e.to_string())?;
-        if !dir.join("Cargo.lock").exists() {
-            std::fs::copy(&lock, dir.join("Cargo.lock")).map_err(|e| e.to_string())?;
-        }
         let lib = src.join("lib.rs");
         std::fs::write(&lib, crate_source(models)).map_err(|e| e.to_string())?;
         // Dependencies (and a first build of the crate), untimed.

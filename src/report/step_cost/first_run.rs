@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use super::compile::run_cargo;
+use super::compile::{run_cargo, throwaway_crate};
 use crate::report::timing::median;
 
 /// The number of coordinates.
@@ -207,20 +207,8 @@ pub fn measure() -> Result<FirstRun, String> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let (runs, note) = heyoka_runs(&root.join("data/baselines/heyoka_first_run.csv"))?;
     let q_ref = reference(&root.join("data/reference/sine_gordon_chain_256.csv"))?;
-    let base = root.join("target").join("step_cost_compile");
-    let target = base.join("target");
-    let dir = base.join("first_run");
+    let (dir, target) = throwaway_crate("first_run")?;
     let src = dir.join("src");
-    std::fs::create_dir_all(&src).map_err(|e| format!("{}: {e}", src.display()))?;
-    let manifest = format!(
-        "[package]\nname = \"first_run\"\nversion = \"0.0.0\"\nedition = \"2021\"\npublish = false\n\n[dependencies]\nforced-vi = {{ path = {:?} }}\n\n[workspace]\n",
-        root.join("forced-vi").display().to_string()
-    );
-    std::fs::write(dir.join("Cargo.toml"), manifest).map_err(|e| e.to_string())?;
-    if !dir.join("Cargo.lock").exists() {
-        std::fs::copy(root.join("Cargo.lock"), dir.join("Cargo.lock"))
-            .map_err(|e| e.to_string())?;
-    }
     let main = src.join("main.rs");
     std::fs::write(&main, SOURCE).map_err(|e| e.to_string())?;
     // Dependencies (and a first build of the crate), untimed.
