@@ -365,6 +365,18 @@ impl Scheme {
     /// not: [`crate::Integrator::auto`] takes the sparse column only from
     /// [`Scheme::AUTO_SPARSE_MIN_DOF`] coordinates.
     ///
+    /// The sparse column does not hold on every model at tight tolerances. On a damped
+    /// sine-Gordon chain of 256 coordinates (the step-cost report's first-answer model;
+    /// adaptive runs to T = 10, one timing each), lobatto5 and lobatto6 took 13.7 and
+    /// 13.5 ms at tol 1e-9 against lobatto4's 22.0 ms, and 19.5 and 17.0 ms at 1e-11
+    /// against 40.8 ms, to about the same error: their steps were 2.6–6.3 times fewer. On
+    /// the FPU chain of 1024 masses (T = 400) and the 32 × 32 membrane (T = 10) lobatto4
+    /// stayed the cheapest from 1e-5 to 1e-11, or within 1 % of it (lobatto5 and lobatto6
+    /// took up to 1.45 and 1.63 times its time on the chain, 1.66 and 2.34 on the
+    /// membrane); on the FPU chain lobatto6's steps were only 1.2–1.6 times fewer than
+    /// lobatto4's. Both chains have the same pattern, so the rule cannot tell them apart
+    /// before a run; where a model is known to behave like the first, choose the scheme.
+    ///
     /// A tolerance that is not finite or not positive gets `lobatto6` (`lobatto4` on the
     /// sparse backend). [`crate::Integrator::auto`] applies it.
     pub fn for_tolerance(tol: f64, sparse: bool) -> Self {
