@@ -373,7 +373,7 @@ impl Scheme {
     /// the FPU chain of 1024 masses (T = 400) and the 32 × 32 membrane (T = 10) lobatto4
     /// stayed the cheapest from 1e-5 to 1e-11, or within 1 % of it (lobatto5 and lobatto6
     /// took up to 1.45 and 1.63 times its time on the chain, 1.66 and 2.34 on the
-    /// membrane); on the FPU chain lobatto6's steps were only 1.2–1.6 times fewer than
+    /// membrane); on the FPU chain lobatto6's steps were only 1.2–2.0 times fewer than
     /// lobatto4's. Both chains have the same pattern, so the rule cannot tell them apart
     /// before a run; where a model is known to behave like the first, choose the scheme.
     ///
