@@ -797,14 +797,10 @@ mod report_step_cost {
 
     mod first_answer {
         use forced_vi_scenes::report::step_cost::first_run::*;
-        fn root() -> std::path::PathBuf {
-            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        }
 
         #[test]
         fn the_committed_heyoka_runs_and_reference_are_read() {
-            let (runs, note) =
-                heyoka_runs(&root().join("data/baselines/heyoka_first_run.csv")).expect("runs");
+            let (runs, note) = heyoka_runs(HEYOKA_CSV).expect("runs");
             assert!(note.contains("heyoka_first_run.py"), "{note}");
             for tol in [1e-6, 1e-9] {
                 let modes: Vec<&str> = (runs.iter())
@@ -817,8 +813,7 @@ mod report_step_cost {
                 assert!(r.jit > 0.0 && r.run > 0.0, "{tol:e} {r:?}");
                 assert!(r.error > 0.0 && r.error < *tol, "{tol:e} {r:?}");
             }
-            let q = reference(&root().join("data/reference/sine_gordon_chain_256.csv"))
-                .expect("reference");
+            let q = reference(REFERENCE_CSV).expect("reference");
             assert_eq!(q.len(), N);
             assert!(q.iter().all(|x| x.is_finite()) && q.iter().any(|x| x.abs() > 1e-3));
         }

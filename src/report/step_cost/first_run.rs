@@ -11,7 +11,7 @@
 //! tolerance of a ladder whose error is at most heyoka's, so that the two answers are equally
 //! accurate.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
@@ -120,14 +120,15 @@ pub struct FirstRun {
     pub note: String,
 }
 
-fn read(path: &Path) -> Result<String, String> {
-    std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
-}
+/// heyoka's committed runs, embedded as the work-precision report embeds `heyoka.csv`.
+pub const HEYOKA_CSV: &str = include_str!("../../../data/baselines/heyoka_first_run.csv");
 
-/// heyoka's runs in `path` (`data/baselines/heyoka_first_run.csv`), each with its tolerance,
-/// in the file's order, and the file's note.
-pub fn heyoka_runs(path: &Path) -> Result<(Vec<(f64, HeyokaRun)>, String), String> {
-    let text = read(path)?;
+/// The reference final state, embedded.
+pub const REFERENCE_CSV: &str = include_str!("../../../data/reference/sine_gordon_chain_256.csv");
+
+/// heyoka's runs in `text` (the format of [`HEYOKA_CSV`]), each with its tolerance, in the
+/// file's order, and the file's note.
+pub fn heyoka_runs(text: &str) -> Result<(Vec<(f64, HeyokaRun)>, String), String> {
     let mut note = String::new();
     let mut runs = Vec::new();
     for line in text.lines() {
@@ -153,22 +154,21 @@ pub fn heyoka_runs(path: &Path) -> Result<(Vec<(f64, HeyokaRun)>, String), Strin
         ));
     }
     if runs.is_empty() {
-        return Err(format!("{}: no runs", path.display()));
+        return Err("heyoka_first_run.csv: no runs".to_string());
     }
     Ok((runs, note))
 }
 
-/// The reference final positions in `path` (`data/reference/sine_gordon_chain_256.csv`).
-pub fn reference(path: &Path) -> Result<Vec<f64>, String> {
-    let q: Vec<f64> = read(path)?
+/// The reference final positions in `text` (the format of [`REFERENCE_CSV`]).
+pub fn reference(text: &str) -> Result<Vec<f64>, String> {
+    let q: Vec<f64> = text
         .lines()
         .skip(1)
         .filter_map(|l| l.split(',').nth(1).and_then(|x| x.trim().parse().ok()))
         .collect();
     if q.len() != N {
         return Err(format!(
-            "{}: {} positions, not {N}",
-            path.display(),
+            "sine_gordon_chain_256.csv: {} positions, not {N}",
             q.len()
         ));
     }
@@ -204,9 +204,8 @@ fn run_once(bin: &Path, tol: f64) -> Result<(f64, f64, usize, String, Vec<f64>),
 
 /// Builds the crate, then runs it against heyoka's committed runs.
 pub fn measure() -> Result<FirstRun, String> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let (runs, note) = heyoka_runs(&root.join("data/baselines/heyoka_first_run.csv"))?;
-    let q_ref = reference(&root.join("data/reference/sine_gordon_chain_256.csv"))?;
+    let (runs, note) = heyoka_runs(HEYOKA_CSV)?;
+    let q_ref = reference(REFERENCE_CSV)?;
     let (dir, target) = throwaway_crate("first_run")?;
     let src = dir.join("src");
     let main = src.join("main.rs");
