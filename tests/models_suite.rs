@@ -32,5 +32,7 @@ mod sparse_macro;
 mod trust_limits;
 #[path = "trust_macro.rs"]
 mod trust_macro;
+#[path = "trust_random.rs"]
+mod trust_random;
 #[path = "trust_runtime.rs"]
 mod trust_runtime;
