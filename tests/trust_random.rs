@@ -1,15 +1,16 @@
 //! Trust under random calls: seeded random combinations of a model (dense and sparse, forced,
 //! driven, stiff, constrained), a scheme (the α rules, midpoint, trapezoid, Lobatto 2–11,
-//! some beyond the supported range), fixed steps or tolerances, a `max_step`, initial data
-//! (or `Integrator::auto`, a `min_step`), initial data given by velocity or momentum, a final
-//! time, an output (the final state, every record, samples at random times, the tangent, the
-//! adjoint gradient, an ensemble with a broken member, a restarted stepper), and now and then
-//! a value that is not finite, zero, negative, subnormal or huge in any of them. Every call must end in `Ok` or a typed
-//! error within a minute: no panic, no hang. Every `Ok` must be finite, and an adaptive final
-//! state on a model whose errors are not amplified much (all but the chaotic Duffing
-//! oscillator and the stiff van der Pol) must be within 100 times the tolerance of lobatto7
-//! at 1e-14; a restarted stepper must end where a new one does, to the bit, and equal members
-//! of an ensemble alike. `cargo test --release --test models_suite trust_random`.
+//! some beyond the supported range), fixed steps or tolerances (or `Integrator::auto`), a
+//! `max_step` or a `min_step`, initial data given by velocity or momentum, a final time, an
+//! output (the final state, every record, samples at random times, the tangent, the adjoint
+//! gradient, an ensemble with a broken member, a restarted stepper), and now and then a value
+//! that is not finite, zero, negative, subnormal or huge in any of them. Every call must end
+//! in `Ok` or a typed error within a minute: no panic, no hang. Every `Ok` must be finite,
+//! and an adaptive final state on a model whose errors are not amplified much (all but the
+//! chaotic Duffing oscillator and the stiff van der Pol) must be within 100 times the
+//! tolerance of lobatto7 at 1e-14; a restarted stepper must end where a new one does, to the
+//! bit, and equal members of an ensemble alike.
+//! `cargo test --release --test models_suite trust_random`.
 //!
 //! Written as a probe on 2026-11-30: 1500 calls of an earlier generator and 30000 of this one
 //! (other seeds) then, none failing.
