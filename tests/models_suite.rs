@@ -24,6 +24,8 @@ mod predictor;
 mod runs;
 #[path = "sensitivity.rs"]
 mod sensitivity;
+#[path = "sensitivity_constrained.rs"]
+mod sensitivity_constrained;
 #[path = "sparse.rs"]
 mod sparse;
 #[path = "sparse_macro.rs"]

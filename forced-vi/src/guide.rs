@@ -335,7 +335,13 @@
 //! forces do the work `∫ λᵀ ∂g/∂t dt`, which the energy ledger adds. When no constraint
 //! names `t`, the attribute promises fixed constraints
 //! ([`ForcedLagrangian::CONSTRAINTS_READ_TIME`] `= false`) and neither is computed. Fixed and adaptive steps, dense output and
-//! ensembles work; non-Lobatto schemes and sensitivities of constrained models are
+//! ensembles work, and so do sensitivities ([`output::Tangents`](crate::output::Tangents))
+//! on the dense backend: the multipliers join the step's unknowns, the end projection is
+//! differentiated too, and parameters that shape the constraints (a length) get their
+//! columns from [`ForcedLagrangian::constraints_with`]. Only directions that keep the
+//! initial data on the constraints are the flow's; the tangent maps others as the discrete
+//! map's extension, which depends on the step. Non-Lobatto schemes, the adjoint of a
+//! constrained model and its tangents on the sparse backend are
 //! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
 //! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),

@@ -376,6 +376,19 @@ impl<'c, 'm> Gen<'c, 'm> {
                 }
             }
         });
+        // The constraints at given parameter values, for the sensitivities of a constrained
+        // model: a parameter may shape the constraint (a pendulum's length).
+        let constraints = (!c.constraints.is_empty()).then(|| {
+            let slots = self.constraint_slots();
+            quote! {
+                #[allow(unused_braces, unused_parens, unused_variables)]
+                fn constraints_with<#d: #scalar_bound>(&self, #dt: #d, #dq: &[#d; #n], __fvi_theta: &[#d], __fvi_g: &mut [#d]) {
+                    let #dv: &[#d; #n] = #dq;
+                    let _ = #dv;
+                    #(#slots)*
+                }
+            }
+        });
         quote! {
             fn parameter_names(&self) -> &'static [&'static str] {
                 &[#(#names),*]
@@ -391,7 +404,36 @@ impl<'c, 'm> Gen<'c, 'm> {
                 #l_body
             }
             #force
+            #constraints
         }
+    }
+
+    /// Each `g_k` written to its slot of `__fvi_g`, with `t` and the coordinates (and, in a
+    /// model checked with its parameters as duals, the parameters from `__fvi_theta`) bound
+    /// as for the Lagrangian.
+    fn constraint_slots(&self) -> Vec<TokenStream> {
+        let (d, dt) = (&self.d, &self.dt);
+        self.c
+            .constraints
+            .iter()
+            .enumerate()
+            .map(|(k, l)| {
+                let bind = self.bindings(&l.names);
+                let t_bind = if l.names.contains(TIME) {
+                    let t = Ident::new(TIME, Span::call_site());
+                    quote!(let #t: #d = #dt;)
+                } else {
+                    TokenStream::new()
+                };
+                let body = lowered_dual(l);
+                let k = lit(k);
+                quote! {
+                    if let ::core::option::Option::Some(__fvi_slot) = __fvi_g.get_mut(#k) {
+                        *__fvi_slot = { #t_bind #bind #body };
+                    }
+                }
+            })
+            .collect()
     }
 
     /// `constraint_count` and `constraints` for a model with `constraints(...)`
@@ -408,22 +450,7 @@ impl<'c, 'm> Gen<'c, 'm> {
         let (n, d, scalar_bound) = (&c.n, &self.d, &self.scalar_bound);
         let (dq, dv, dt) = (&self.dq, &self.dv, &self.dt);
         let count = lit(c.constraints.len());
-        let slots = c.constraints.iter().enumerate().map(|(k, l)| {
-            let bind = self.bindings(&l.names);
-            let t_bind = if l.names.contains(TIME) {
-                let t = Ident::new(TIME, Span::call_site());
-                quote!(let #t: #d = #dt;)
-            } else {
-                TokenStream::new()
-            };
-            let body = lowered_dual(l);
-            let k = lit(k);
-            quote! {
-                if let ::core::option::Option::Some(__fvi_slot) = __fvi_g.get_mut(#k) {
-                    *__fvi_slot = { #t_bind #bind #body };
-                }
-            }
-        });
+        let slots = self.constraint_slots();
         // No constraint names `t`, so none reads it (`t` is not even bound in their code): the
         // promise that lets the runtime leave out their rate `∂g/∂t`.
         let reads_time = c.constraints.iter().any(|l| l.names.contains(TIME));

@@ -529,10 +529,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
         let prob = &mut self.prob;
         let noise = (prob.noise, prob.noise_h);
         std::mem::swap(&mut prob.noise_rows, &mut self.noise_keep);
+        // A constrained step's Jacobian is that of the iteration's units: its multipliers
+        // over their factors (see `StepProblem::scale_constraints`); `solve_linearized`
+        // takes the factors on rows and unknowns back out.
+        let constrained = M::CONSTRAINED && prob.cons > 0;
+        let scaled;
+        let z = if constrained {
+            let nz = (prob.scheme.stages() - 1) * N;
+            let mut zs = self.z.clone();
+            for (i, w) in zs.iter_mut().enumerate().skip(nz) {
+                *w /= prob.col_scale[(i - nz) % prob.cons];
+            }
+            scaled = zs;
+            &scaled
+        } else {
+            &self.z
+        };
         let made = self
             .tangent
             .get_or_insert_with(|| Newton::new(dim, opts))
-            .factor_at(prob, &self.z)
+            .factor_at(prob, z)
             .map_err(StepFailure::Newton);
         std::mem::swap(&mut prob.noise_rows, &mut self.noise_keep);
         (prob.noise, prob.noise_h) = noise;
@@ -555,9 +571,25 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
             self.rhs = DVector::zeros(b.len());
         }
         self.rhs.as_mut_slice().copy_from_slice(b);
+        // A constrained step's rows `g(x_j)` and unknowns `ŵ_j` in the iteration's units
+        // (see `linearize`): each constraint's rows times its factor, its unknowns over it.
+        let prob = &self.prob;
+        let m = if M::CONSTRAINED { prob.cons } else { 0 };
+        let nz = if m > 0 {
+            (prob.scheme.stages() - 1) * N
+        } else {
+            b.len()
+        };
+        let (rows, cols) = (&prob.row_scale, &prob.col_scale);
+        for (i, x) in self.rhs.iter_mut().enumerate().skip(nz) {
+            *x *= rows[(i - nz) % m];
+        }
         match &self.tangent {
             Some(t) => t.solve_factored(&mut self.rhs),
             None => self.rhs.fill(f64::NAN),
+        }
+        for (i, x) in self.rhs.iter_mut().enumerate().skip(nz) {
+            *x *= cols[(i - nz) % m];
         }
         b.copy_from_slice(self.rhs.as_slice());
     }
@@ -728,6 +760,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
 
     #[inline(always)]
     fn deep_stack(&self) -> bool {
+        true
+    }
+    fn constrained_tangents(&self) -> bool {
         true
     }
 }

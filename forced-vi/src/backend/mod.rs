@@ -271,6 +271,9 @@ pub(crate) trait StepBackend {
     /// Whether the node kernels of this backend need a deep stack (see
     /// [`crate::stepper`]'s stack guard).
     fn deep_stack(&self) -> bool;
+    /// Whether [`Self::linearize`] and [`Self::solve_linearized`] carry a constrained
+    /// step's multipliers and constraint rows (the tangent of a constrained model).
+    fn constrained_tangents(&self) -> bool;
 }
 
 /// The backend of a run: dense or sparse.
@@ -552,5 +555,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn deep_stack(&self) -> bool {
         forward!(self, b => b.deep_stack())
+    }
+    #[inline(always)]
+    fn constrained_tangents(&self) -> bool {
+        forward!(self, b => b.constrained_tangents())
     }
 }

@@ -502,4 +502,8 @@ impl StepBackend for SparseBackend<'_> {
     fn deep_stack(&self) -> bool {
         false
     }
+    // Its saddle-point solves are the step's alone, so far.
+    fn constrained_tangents(&self) -> bool {
+        false
+    }
 }

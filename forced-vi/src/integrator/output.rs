@@ -114,7 +114,10 @@ pub fn each_step<const N: usize, F: FnMut(&StepRecord<N>)>(f: F) -> EachStep<F> 
 /// costs one more solve with those factors (no finite differences). The cost is about
 /// `2N + P` linear solves per step on top of the run, on either backend. With tolerances the
 /// step sequence is held fixed: the result is the derivative of the same steps from
-/// perturbed data. A constrained model is refused ([`Error::UnsupportedConstraints`]).
+/// perturbed data. A constrained model carries its multipliers and its end projection
+/// through the tangent too (dense backend; the sparse one refuses it with
+/// [`Error::UnsupportedConstraints`]); only directions of `(q_0, v_0)` that keep the
+/// initial data on the constraints are derivatives of the flow.
 ///
 /// ```
 /// use forced_vi::prelude::*;
@@ -303,7 +306,7 @@ impl<const N: usize> Output<N> for Tangents {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Sensitivities<N>, RunFailure<N>> {
-        refuse_constraints(integ)?;
+        refuse_large(integ)?;
         open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
@@ -365,18 +368,25 @@ where
     }
 }
 
-/// The derivatives do not carry the multipliers of a constrained model yet: refused rather
+/// The adjoint does not carry the multipliers of a constrained model yet: refused rather
 /// than wrong.
 fn refuse_constraints<M: ForcedLagrangian<N>, const N: usize>(
     integ: &Integrator<'_, M, N>,
 ) -> Result<(), RunFailure<N>> {
     if integ.model.constraint_count() > 0 {
         return Err(RunFailure::new(Error::UnsupportedConstraints {
-            message: "sensitivities of constrained models are not supported yet",
+            message: "the adjoint of a constrained model is not supported yet (`output::Tangents` \
+                      carries its sensitivities)",
         }));
     }
-    // The parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a
-    // stack that could not be mapped would end the process.
+    refuse_large(integ)
+}
+
+/// The parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a stack
+/// that could not be mapped would end the process.
+fn refuse_large<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+) -> Result<(), RunFailure<N>> {
     let stack_bytes = crate::model::general::parameter_stack_bytes::<N>();
     if stack_bytes > crate::MAX_KERNEL_STACK && !integ.model.parameter_names().is_empty() {
         return Err(RunFailure::new(Error::SensitivitiesTooLarge {

@@ -206,6 +206,15 @@ pub trait ForcedLagrangian<const N: usize> {
         let _ = (t, q, g);
     }
 
+    /// `g(t, q)` with the parameters set to `theta` (dual numbers, so that sensitivities
+    /// can differentiate the constraints in them, DESIGN §12). The default ignores `theta`:
+    /// a hand-written model whose constraints read a parameter must write this too, as it
+    /// writes [`ForcedLagrangian::lagrangian_with`]; the macro writes it.
+    fn constraints_with<D: Scalar>(&self, t: D, q: &[D; N], theta: &[D], g: &mut [D]) {
+        let _ = theta;
+        self.constraints(t, q, g)
+    }
+
     /// Stack bytes that one call of a node kernel may need. The integrator runs the
     /// kernels on a stack at least this deep (growing it on the heap when the caller's is
     /// too shallow), so a large model cannot overflow a 2 MiB thread stack. The default
@@ -503,6 +512,52 @@ pub mod general {
             q,
         );
         h
+    }
+
+    /// A direction in `(t, q, θ)` for [`constraint_second_at`]: a rate in `t`, one in `q`
+    /// (`None`: none) and a unit rate in one parameter (`None`: none).
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Direction<'a> {
+        pub(crate) t: f64,
+        pub(crate) q: Option<&'a [f64]>,
+        pub(crate) theta: Option<usize>,
+    }
+
+    /// The constraints' first derivatives along `d1` and `d2` and their second derivative
+    /// along both at `(t, q)` with the parameters `theta`, each `m` values (into `first1`,
+    /// `first2`, `second`), from one evaluation of [`ForcedLagrangian::constraints_with`]
+    /// with hyper-dual numbers. The sensitivities of a constrained step need them (DESIGN
+    /// §12): `Σ_r w_r ∂²g_r/∂q∂θ`, the rate `∂(G v + ∂g/∂t)/∂q`, `∂g/∂θ`.
+    pub(crate) fn constraint_second_at<M: ForcedLagrangian<N>, const N: usize>(
+        m: &M,
+        (t, q, theta): (f64, &[f64], &[f64]),
+        (d1, d2): (Direction<'_>, Direction<'_>),
+        (first1, first2, second): (&mut [f64], &mut [f64], &mut [f64]),
+    ) {
+        use num_dual::HyperDual64;
+        let count = m.constraint_count();
+        let along =
+            |d: &Direction<'_>, a: usize| d.q.and_then(|x| x.get(a).copied()).unwrap_or(0.0);
+        let at = |x: &[f64], a: usize| x.get(a).copied().unwrap_or(f64::NAN);
+        let qh: Vec<HyperDual64> = (0..N)
+            .map(|a| HyperDual64::new(at(q, a), along(&d1, a), along(&d2, a), 0.0))
+            .collect();
+        let unit = |d: &Direction<'_>, k: usize| if d.theta == Some(k) { 1.0 } else { 0.0 };
+        let th: Vec<HyperDual64> = (theta.iter().enumerate())
+            .map(|(k, &x)| HyperDual64::new(x, unit(&d1, k), unit(&d2, k), 0.0))
+            .collect();
+        let th_dual = HyperDual64::new(t, d1.t, d2.t, 0.0);
+        let mut g = vec![HyperDual64::from(0.0); count];
+        if let Ok(arr) = <&[HyperDual64; N]>::try_from(&qh[..]) {
+            m.constraints_with(th_dual, arr, &th, &mut g);
+        }
+        for (r, gr) in g.iter().enumerate() {
+            if let (Some(a), Some(b), Some(c)) =
+                (first1.get_mut(r), first2.get_mut(r), second.get_mut(r))
+            {
+                (*a, *b, *c) = (gr.eps1, gr.eps2, gr.eps1eps2);
+            }
+        }
     }
 
     /// A bound on the stack that [`constraint_jacobian_at`] and [`constraint_curvature_at`]

@@ -44,6 +44,7 @@ mod predict;
 mod start;
 mod state;
 mod tangent;
+mod tangent_constrained;
 
 use nalgebra::SVector;
 

@@ -20,6 +20,7 @@
 
 use nalgebra::{DMatrix, SVector};
 
+use super::tangent_constrained::propagate_constrained;
 use super::{Stepper, with_stack};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
@@ -33,16 +34,16 @@ pub(crate) struct Tangent {
     /// The columns before a subdivided step, restored if it fails.
     saved: Vec<f64>,
     /// Control-point directions and linearised gradients, `s` blocks of `N`.
-    dx: Vec<f64>,
-    g: Vec<f64>,
+    pub(super) dx: Vec<f64>,
+    pub(super) g: Vec<f64>,
     /// The right-hand side of a tangent solve, in the backend's layout.
-    rhs: Vec<f64>,
+    pub(super) rhs: Vec<f64>,
     /// One node's `dx`, `dv`, `d(L_q + F)`, `dL_v`.
-    node: [Vec<f64>; 4],
+    pub(super) node: [Vec<f64>; 4],
     /// The parameters' values, and per quadrature node and parameter `θ_k` the derivatives
     /// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` (`2N` entries) of the step just solved.
-    theta: Vec<f64>,
-    pnode: Vec<f64>,
+    pub(super) theta: Vec<f64>,
+    pub(super) pnode: Vec<f64>,
 }
 
 impl Tangent {
@@ -67,6 +68,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// parameters `θ`: `2N + P` columns, `dp_0 = C dq_0 + E dv_0 + ∂L_v/∂θ dθ` (DESIGN §12).
     /// Only before the first step.
     pub(crate) fn track_tangent(&mut self) -> Result<(), Error> {
+        if M::CONSTRAINED
+            && self.model.constraint_count() > 0
+            && !self.backend.constrained_tangents()
+        {
+            return Err(Error::UnsupportedConstraints {
+                message: "sensitivities of a constrained model on the sparse backend are not \
+                          supported yet (the dense backend carries them)",
+            });
+        }
         let s = self.scheme.stages();
         let dim = self.backend.z().len();
         let theta = super::checks::parameter_values(self.model)?;
@@ -111,11 +121,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// solution the backend still holds. Nothing changes on failure, but for columns that
     /// overflowed ([`StepFailure::TangentOverflow`]), which end the run.
     pub(super) fn tangent_step(&mut self) -> Result<(), StepFailure> {
+        let Some(theta) = self.tangent.as_ref().map(|tg| tg.theta.clone()) else {
+            return Ok(());
+        };
+        self.backend.linearize()?;
+        // A constrained step's own terms (see `super::tangent_constrained`).
+        let terms = if M::CONSTRAINED && self.model.constraint_count() > 0 {
+            let need =
+                general::constraint_stack_bytes::<N>().max(general::parameter_stack_bytes::<N>());
+            Some(with_stack(need, || self.constraint_terms(&theta))?)
+        } else {
+            None
+        };
         let Some(tg) = self.tangent.as_mut() else {
             return Ok(());
         };
         let backend = &mut self.backend;
-        backend.linearize()?;
         let sch = self.scheme;
         let h = self.state.h_prev;
         let np = tg.theta.len();
@@ -133,7 +154,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 tg.pnode[o + N..o + 2 * N].copy_from_slice(g.lv.as_slice());
             }
         }
-        propagate(backend, tg, h, N);
+        match &terms {
+            Some(terms) => propagate_constrained(backend, tg, h, N, terms),
+            None => propagate(backend, tg, h, N),
+        }
         // Columns that left the range of `f64` (the flow stretches perturbations beyond it)
         // end the run here, at the step where they did: nothing after it could be finite.
         if tg.m.iter().all(|x| x.is_finite()) {
@@ -176,7 +200,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
 
 /// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` at `(t, q, v)`, on a stack deep enough for its dual
 /// numbers.
-fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
+pub(super) fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
     (t, q, v): (f64, &[f64], &[f64]),
     theta: &[f64],
@@ -207,7 +231,7 @@ fn check_parameter_gradient<const N: usize>(g: &NodeGradient<N>, t: f64) -> Resu
 /// `ε |dq| / h`, and the tangent took it into `dp` at every step: on the coupled oscillators
 /// of the tests, 3.6·10⁶ fixed lobatto3 steps ended 3.5e-7 off a reference Jacobian, against
 /// 1e-10 for the adjoint of the same run.
-fn linearized_gradients(
+pub(super) fn linearized_gradients(
     backend: &dyn StepBackend,
     h: f64,
     dx: &[f64],

@@ -1,0 +1,391 @@
+//! Sensitivities of constrained models (DESIGN §11, §12): the tangent of the constrained
+//! step, its multipliers and its end projection, against central differences of whole
+//! fixed-step runs from initial data on the constraints (and parameters, the constraints'
+//! own among them), and against the same pendulum in its angle, an independent
+//! discretisation. `cargo test --release --test models_suite sensitivity_constrained::`.
+
+use forced_vi::output;
+use forced_vi::{
+    forced_lagrangian, ForcedLagrangian, InitialState, Integrator, LinearPath, Scheme,
+};
+use forced_vi_models::models::CartesianPendulum;
+use forced_vi_models::rigid_chain::RigidChain;
+use nalgebra::DVector;
+
+/// A pendulum in its angle: `L = ½ m l² θ̇² + m g l cos θ`, drag `−c l² θ̇` (the Cartesian
+/// pendulum's drag `−c v` in the angle).
+#[forced_lagrangian(
+    coordinates(th),
+    lagrangian = 0.5 * m * l * l * th_dot * th_dot + m * g * l * th.cos(),
+    force(th = -c * l * l * th_dot),
+)]
+#[derive(Clone, Copy, Debug)]
+struct AnglePendulum {
+    m: f64,
+    g: f64,
+    l: f64,
+    c: f64,
+}
+
+/// A pendulum whose pivot swings along `x` as `a sin(w t)`: a constraint that reads the time
+/// and two parameters.
+#[forced_lagrangian(
+    coordinates(x, y),
+    lagrangian = 0.5 * (x_dot * x_dot + y_dot * y_dot) - 9.81 * y,
+    force(x = -c * x_dot, y = -c * y_dot),
+    constraints(0.5 * ((x - a * (w * t).sin()) * (x - a * (w * t).sin()) + y * y - r * r)),
+)]
+#[derive(Clone, Copy, Debug)]
+struct SwingingPivot {
+    a: f64,
+    w: f64,
+    r: f64,
+    c: f64,
+}
+
+/// A double pendulum in Cartesian coordinates: two constraints, masses and lengths as
+/// parameters.
+#[forced_lagrangian(
+    coordinates(x1, y1, x2, y2),
+    lagrangian = 0.5 * m1 * (x1_dot * x1_dot + y1_dot * y1_dot)
+        + 0.5 * m2 * (x2_dot * x2_dot + y2_dot * y2_dot)
+        - 9.81 * (m1 * y1 + m2 * y2),
+    force(x1 = -c * x1_dot, y1 = -c * y1_dot, x2 = -c * x2_dot, y2 = -c * y2_dot),
+    constraints(
+        0.5 * (x1 * x1 + y1 * y1 - l1 * l1),
+        0.5 * ((x2 - x1) * (x2 - x1) + (y2 - y1) * (y2 - y1) - l2 * l2),
+    ),
+)]
+#[derive(Clone, Copy, Debug)]
+struct CartesianDouble {
+    m1: f64,
+    m2: f64,
+    l1: f64,
+    l2: f64,
+    c: f64,
+}
+
+/// A model with its initial positions and velocities.
+type Start<M, const N: usize> = (M, [f64; N], [f64; N]);
+
+/// A case: a model, its initial data on the constraints and its parameters, all from one
+/// vector `x` (the model's parameters first, in the order of its `parameter_names`, then
+/// those of the initial data).
+struct Case<M, const N: usize> {
+    name: &'static str,
+    build: fn(&[f64]) -> Start<M, N>,
+    x: Vec<f64>,
+    params: usize,
+}
+
+/// The final `(q, v)` of a fixed-step run from the case at `x`, and (with `tangents`) the
+/// derivative of it in `x` from the carried tangent: `wrt_initial · ∂(q₀, v₀)/∂x` (by
+/// central differences of the initial data alone, which are closed forms) plus the
+/// parameters' columns.
+fn end_state<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    x: &[f64],
+    (scheme, h, t_final): (&Scheme, f64, f64),
+) -> DVector<f64> {
+    let (model, q0, v0) = (case.build)(x);
+    let integ = Integrator::new(&model, scheme.clone(), h).expect("an integrator");
+    let end = integ
+        .final_state(InitialState::from_velocity(q0, v0), t_final)
+        .expect("a run from data on the constraints");
+    DVector::from_iterator(2 * N, end.q.iter().chain(end.v.iter()).copied())
+}
+
+/// The derivative of the final `(q, v)` along each entry of `x` from the carried tangent
+/// of a run: `wrt_initial · ∂(q₀, v₀)/∂x_i` plus, for a parameter, its column. The initial
+/// data's derivatives are central differences of their closed forms (exact to round-off at
+/// this step). Only such directions, which keep the initial data on the constraints, are
+/// the flow's: the tangent maps others too, as the discrete map's extension off the
+/// constraints, which depends on the step.
+fn along_x<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    sens: &forced_vi::Sensitivities<N>,
+) -> nalgebra::DMatrix<f64> {
+    let mut out = nalgebra::DMatrix::zeros(2 * N, case.x.len());
+    for i in 0..case.x.len() {
+        let d = 1e-6 * case.x[i].abs().max(1.0);
+        let at = |sign: f64| {
+            let mut x = case.x.clone();
+            x[i] += sign * d;
+            (case.build)(&x)
+        };
+        let ((_, qp, vp), (_, qm, vm)) = (at(1.0), at(-1.0));
+        let dy0 = DVector::from_iterator(
+            2 * N,
+            (0..N)
+                .map(|a| (qp[a] - qm[a]) / (2.0 * d))
+                .chain((0..N).map(|a| (vp[a] - vm[a]) / (2.0 * d))),
+        );
+        let mut col = &sens.wrt_initial * dy0;
+        if i < case.params {
+            col += sens.wrt_parameters.column(i);
+        }
+        out.set_column(i, &col);
+    }
+    out
+}
+
+/// A sensitivity run of the case at its `x`: fixed steps of `h`, or (`adaptive`) at
+/// `rtol = atol = h`.
+fn tangents<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    scheme: &Scheme,
+    (h, adaptive): (f64, bool),
+    t_final: f64,
+) -> forced_vi::Sensitivities<N> {
+    let (model, q0, v0) = (case.build)(&case.x);
+    let integ = if adaptive {
+        Integrator::adaptive(&model, scheme.clone(), h, h)
+    } else {
+        Integrator::new(&model, scheme.clone(), h)
+    };
+    let sens = integ
+        .expect("an integrator")
+        .solve(
+            InitialState::from_velocity(q0, v0),
+            t_final,
+            output::Tangents,
+        )
+        .expect("a sensitivity run");
+    assert_eq!(sens.wrt_parameters.ncols(), case.params, "{}", case.name);
+    sens
+}
+
+/// `max |tangent − differences| / max |differences|` over the directions of `x`, for a
+/// scheme with fixed steps.
+fn tangent_error<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    (scheme, h, t_final): (&Scheme, f64, f64),
+) -> f64 {
+    let run = (scheme, h, t_final);
+    let sens = tangents(case, scheme, (h, false), t_final);
+    let tangent = along_x(case, &sens);
+    let (mut worst, mut size) = (0.0f64, 0.0f64);
+    for i in 0..case.x.len() {
+        let d = 1e-6 * case.x[i].abs().max(1.0);
+        let at = |sign: f64| {
+            let mut x = case.x.clone();
+            x[i] += sign * d;
+            x
+        };
+        let diff = (end_state(case, &at(1.0), run) - end_state(case, &at(-1.0), run)) / (2.0 * d);
+        worst = worst.max((tangent.column(i) - &diff).amax());
+        size = size.max(diff.amax());
+    }
+    worst / size
+}
+
+fn pendulum_case() -> Case<CartesianPendulum, 2> {
+    Case {
+        name: "cartesian_pendulum",
+        build: |x| {
+            let model = CartesianPendulum {
+                m: x[0],
+                g: x[1],
+                l: x[2],
+                c: x[3],
+            };
+            let (l, th, om) = (x[2], x[4], x[5]);
+            let q0 = [l * th.sin(), -l * th.cos()];
+            let v0 = [l * om * th.cos(), l * om * th.sin()];
+            (model, q0, v0)
+        },
+        x: vec![1.3, 9.81, 0.8, 0.3, 0.7, 0.4],
+        params: 4,
+    }
+}
+
+fn swinging_case() -> Case<SwingingPivot, 2> {
+    Case {
+        name: "swinging_pivot",
+        build: |x| {
+            let model = SwingingPivot {
+                a: x[0],
+                w: x[1],
+                r: x[2],
+                c: x[3],
+            };
+            let (aw, r, th, om) = (x[0] * x[1], x[2], x[4], x[5]);
+            // The pivot at 0 and moving at `a w` at t = 0.
+            let q0 = [r * th.sin(), -r * th.cos()];
+            let v0 = [aw + r * om * th.cos(), r * om * th.sin()];
+            (model, q0, v0)
+        },
+        x: vec![0.2, 3.0, 1.1, 0.1, 0.5, -0.3],
+        params: 4,
+    }
+}
+
+fn double_case() -> Case<CartesianDouble, 4> {
+    Case {
+        name: "cartesian_double",
+        build: |x| {
+            let model = CartesianDouble {
+                m1: x[0],
+                m2: x[1],
+                l1: x[2],
+                l2: x[3],
+                c: x[4],
+            };
+            let (l1, l2, a, b, wa, wb) = (x[2], x[3], x[5], x[6], x[7], x[8]);
+            let (x1, y1) = (l1 * a.sin(), -l1 * a.cos());
+            let (u1, w1) = (l1 * wa * a.cos(), l1 * wa * a.sin());
+            let q0 = [x1, y1, x1 + l2 * b.sin(), y1 - l2 * b.cos()];
+            let v0 = [u1, w1, u1 + l2 * wb * b.cos(), w1 + l2 * wb * b.sin()];
+            (model, q0, v0)
+        },
+        x: vec![1.0, 0.7, 1.0, 0.8, 0.05, 0.9, -0.4, 0.2, 0.5],
+        params: 5,
+    }
+}
+
+#[test]
+fn the_parameter_names_follow_the_fields() {
+    let m = CartesianPendulum::DEFAULT;
+    assert_eq!(m.parameter_names(), ["m", "g", "l", "c"]);
+    let s = SwingingPivot {
+        a: 0.0,
+        w: 0.0,
+        r: 1.0,
+        c: 0.0,
+    };
+    assert_eq!(s.parameter_names(), ["a", "w", "r", "c"]);
+}
+
+#[test]
+fn constrained_tangents_match_central_differences() {
+    for s in 2..=5 {
+        let scheme = Scheme::lobatto(s).unwrap();
+        let run = (&scheme, 0.02, 1.5);
+        let e1 = tangent_error(&pendulum_case(), run);
+        let e2 = tangent_error(&swinging_case(), run);
+        let e3 = tangent_error(&double_case(), (&scheme, 0.02, 1.0));
+        println!("lobatto{s}: pendulum {e1:.2e}, swinging pivot {e2:.2e}, double {e3:.2e}");
+        // Measured: 1e-11 to 1.5e-10, the differences' own round-off (`ε |x| / δ`). With
+        // the step polynomial's end slope in place of the projected velocity, 3e-6
+        // (lobatto4) to 8.6e-3 (lobatto2).
+        for (name, e) in [("pendulum", e1), ("swinging", e2), ("double", e3)] {
+            assert!(e < 1e-8, "lobatto{s} {name}: {e:.2e}");
+        }
+    }
+}
+
+/// The Cartesian pendulum's tangent, mapped to its angle (`dθ = (x dy − y dx)/l²`), against
+/// the pendulum written in its angle: two discretisations, equal to their own errors.
+#[test]
+fn constrained_tangent_matches_the_angle_pendulum() {
+    let (m, g, l, c) = (1.3, 9.81, 0.8, 0.3);
+    let (th, om) = (0.7f64, 0.4f64);
+    let (h, t_final) = (0.01, 2.0);
+    let scheme = Scheme::lobatto(4).unwrap();
+    let cart = CartesianPendulum { m, g, l, c };
+    let q0 = [l * th.sin(), -l * th.cos()];
+    let v0 = [l * om * th.cos(), l * om * th.sin()];
+    let sc = Integrator::new(&cart, scheme.clone(), h)
+        .unwrap()
+        .solve(
+            InitialState::from_velocity(q0, v0),
+            t_final,
+            output::Tangents,
+        )
+        .unwrap();
+    let angle = AnglePendulum { m, g, l, c };
+    let sa = Integrator::new(&angle, scheme, h)
+        .unwrap()
+        .solve(
+            InitialState::from_velocity([th], [om]),
+            t_final,
+            output::Tangents,
+        )
+        .unwrap();
+    // Directions of (θ₀, ω₀) in Cartesian initial data.
+    let dth = DVector::from_vec(vec![
+        l * th.cos(),
+        l * th.sin(),
+        -l * om * th.sin(),
+        l * om * th.cos(),
+    ]);
+    let dom = DVector::from_vec(vec![0.0, 0.0, l * th.cos(), l * th.sin()]);
+    let (x, y) = (sc.q[0], sc.q[1]);
+    let (xd, yd) = (sc.v[0], sc.v[1]);
+    let mut worst = 0.0f64;
+    for (col, d) in [(0, dth), (1, dom)] {
+        let t = &sc.wrt_initial * d;
+        // θ = atan2(x, −y), ω = (x ẏ − y ẋ)/l².
+        let dtheta = (-y * t[0] + x * t[1]) / (l * l);
+        let domega = (t[0] * yd + x * t[3] - t[1] * xd - y * t[2]) / (l * l);
+        worst = worst.max((dtheta - sa.wrt_initial[(0, col)]).abs());
+        worst = worst.max((domega - sa.wrt_initial[(1, col)]).abs());
+    }
+    // Parameters: g, m, c enter both alike (l too, with the initial data fixed in θ).
+    for name in ["m", "g", "c"] {
+        let kc = cart
+            .parameter_names()
+            .iter()
+            .position(|n| *n == name)
+            .unwrap();
+        let ka = angle
+            .parameter_names()
+            .iter()
+            .position(|n| *n == name)
+            .unwrap();
+        let t = sc.wrt_parameters.column(kc);
+        let dtheta = (-y * t[0] + x * t[1]) / (l * l);
+        let domega = (t[0] * yd + x * t[3] - t[1] * xd - y * t[2]) / (l * l);
+        worst = worst.max((dtheta - sa.wrt_parameters[(0, ka)]).abs());
+        worst = worst.max((domega - sa.wrt_parameters[(1, ka)]).abs());
+    }
+    println!("Cartesian against angle: {worst:.2e}");
+    assert!(worst < 1e-10, "{worst:.2e}");
+}
+
+/// With tolerances the step sequence is held fixed; the tangent of an adaptive run is that of
+/// its steps, and so close to a fine fixed-step run's along the constraints.
+#[test]
+fn adaptive_constrained_tangents_follow_fixed_ones() {
+    let case = double_case();
+    let scheme = Scheme::lobatto(4).unwrap();
+    let fine = along_x(&case, &tangents(&case, &scheme, (1e-3, false), 1.0));
+    for tol in [1e-6, 1e-9] {
+        let sens = tangents(&case, &scheme, (tol, true), 1.0);
+        let e = (along_x(&case, &sens) - &fine).amax() / fine.amax();
+        println!("tol {tol:.0e}: {} steps, {e:.2e}", sens.stats.steps);
+        assert!(e < 10.0 * tol, "tol {tol:.0e}: {e:.2e}");
+    }
+}
+
+#[test]
+fn constrained_adjoint_and_sparse_tangents_stay_refused() {
+    let model = CartesianPendulum::DEFAULT;
+    let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
+    let init = InitialState::from_velocity([0.0, -model.l], [0.5, 0.0]);
+    let adj = integ.solve(
+        init,
+        0.1,
+        output::adjoint(|e| (e.q, nalgebra::SVector::zeros())),
+    );
+    assert!(matches!(
+        adj.map_err(|f| f.error),
+        Err(forced_vi::Error::UnsupportedConstraints { .. })
+    ));
+    let chain = RigidChain::<16>::default();
+    let sparse = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3)
+        .unwrap()
+        .linear_path(LinearPath::Sparse)
+        .solve(chain.initial(), 0.01, output::Tangents);
+    assert!(matches!(
+        sparse.map_err(|f| f.error),
+        Err(forced_vi::Error::UnsupportedConstraints { .. })
+    ));
+    // The same chain on the dense backend carries them.
+    let dense = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3)
+        .unwrap()
+        .linear_path(LinearPath::Dense)
+        .solve(chain.initial(), 0.01, output::Tangents)
+        .expect("dense constrained tangents");
+    assert!(dense.wrt_initial.iter().all(|x| x.is_finite()));
+}
