@@ -395,6 +395,15 @@ where
         Ok((timing::median(&mut new), timing::median(&mut restarted)))
     }
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError> {
+        // A constrained map's tangent is singular off the constraints (it takes every
+        // direction onto them), so the inverse below does not exist: A would need a basis of
+        // the constraints' tangent space. Not measured ("–" in the report).
+        if self.model.constraint_count() > 0 {
+            return Err(SceneError::Reference {
+                scene: self.name,
+                message: "the amplification of a constrained scene is not measured".into(),
+            });
+        }
         let (q0, v0) = self.start(0)?;
         let init = InitialState::from_velocity(q0, v0);
         let h = self.t_final / steps.max(1) as f64;

@@ -358,20 +358,55 @@ fn adaptive_constrained_tangents_follow_fixed_ones() {
     }
 }
 
+/// The gradient of a loss of the final state (`output::adjoint`), which a constrained model
+/// gets from its forward tangent, against central differences of the loss along each
+/// direction of the case.
 #[test]
-fn constrained_adjoint_and_sparse_tangents_stay_refused() {
-    let model = CartesianPendulum::DEFAULT;
-    let integ = Integrator::new(&model, Scheme::lobatto(3).unwrap(), 0.01).unwrap();
-    let init = InitialState::from_velocity([0.0, -model.l], [0.5, 0.0]);
-    let adj = integ.solve(
-        init,
-        0.1,
-        output::adjoint(|e| (e.q, nalgebra::SVector::zeros())),
-    );
-    assert!(matches!(
-        adj.map_err(|f| f.error),
-        Err(forced_vi::Error::UnsupportedConstraints { .. })
-    ));
+fn constrained_adjoint_matches_central_differences() {
+    let case = swinging_case();
+    let scheme = Scheme::lobatto(3).unwrap();
+    let (h, t_final) = (0.02, 1.5);
+    // ℓ = ½ |q_T|² + v_T,x.
+    let loss = |y: &DVector<f64>| 0.5 * (y[0] * y[0] + y[1] * y[1]) + y[2];
+    let (model, q0, v0) = (case.build)(&case.x);
+    let grad = Integrator::new(&model, scheme.clone(), h)
+        .unwrap()
+        .solve(
+            InitialState::from_velocity(q0, v0),
+            t_final,
+            output::adjoint(|e| (e.q, nalgebra::SVector::from([1.0, 0.0]))),
+        )
+        .expect("a constrained adjoint");
+    assert_eq!(grad.tape_bytes, 0);
+    let mut worst = 0.0f64;
+    for i in 0..case.x.len() {
+        let d = 1e-6 * case.x[i].abs().max(1.0);
+        let at = |sign: f64| {
+            let mut x = case.x.clone();
+            x[i] += sign * d;
+            x
+        };
+        let ((_, qp, vp), (_, qm, vm)) = ((case.build)(&at(1.0)), (case.build)(&at(-1.0)));
+        let dy0: Vec<f64> = (0..2)
+            .map(|a| (qp[a] - qm[a]) / (2.0 * d))
+            .chain((0..2).map(|a| (vp[a] - vm[a]) / (2.0 * d)))
+            .collect();
+        let mut mine: f64 = grad.wrt_initial.iter().zip(&dy0).map(|(g, y)| g * y).sum();
+        if i < case.params {
+            mine += grad.wrt_parameters[i];
+        }
+        let run = (&scheme, h, t_final);
+        let diff = (loss(&end_state(&case, &at(1.0), run))
+            - loss(&end_state(&case, &at(-1.0), run)))
+            / (2.0 * d);
+        worst = worst.max((mine - diff).abs() / diff.abs().max(1.0));
+    }
+    println!("adjoint against differences: {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:.2e}");
+}
+
+#[test]
+fn constrained_tangents_on_the_sparse_backend_stay_refused() {
     let chain = RigidChain::<16>::default();
     let sparse = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3)
         .unwrap()

@@ -340,9 +340,10 @@
 //! differentiated too, and parameters that shape the constraints (a length) get their
 //! columns from [`ForcedLagrangian::constraints_with`]. Only directions that keep the
 //! initial data on the constraints are the flow's; the tangent maps others as the discrete
-//! map's extension, which depends on the step. Non-Lobatto schemes, the adjoint of a
-//! constrained model and its tangents on the sparse backend are
-//! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
+//! map's extension, which depends on the step. A loss gradient
+//! ([`output::adjoint`](crate::output::adjoint)) of a constrained model comes from that
+//! tangent, at its cost. Non-Lobatto schemes and sensitivities of a constrained model on
+//! the sparse backend are [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
 //! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),
 //! [`SparseNode::eval_constraints`](crate::model::SparseNode::eval_constraints)); for a model
