@@ -424,3 +424,45 @@ fn constrained_tangents_on_the_sparse_backend_stay_refused() {
         .expect("dense constrained tangents");
     assert!(dense.wrt_initial.iter().all(|x| x.is_finite()));
 }
+
+/// Without forces the constrained Lobatto map is symplectic on the constraints (RATTLE and
+/// its higher-order kin): for two directions `u, w` tangent to them in `(q, p)`,
+/// `ω(M u, M w) = ω(u, w)`. With drag the form contracts instead, so the check can fail.
+#[test]
+fn unforced_constrained_map_is_symplectic_on_the_constraints() {
+    let (m, g, l) = (1.3, 9.81, 0.8);
+    let (th, om) = (0.7f64, 0.4f64);
+    let q0 = [l * th.sin(), -l * th.cos()];
+    let v0 = [l * om * th.cos(), l * om * th.sin()];
+    // (dq, dp) along θ and along ω; p = m v.
+    let u = [
+        l * th.cos(),
+        l * th.sin(),
+        -m * l * om * th.sin(),
+        m * l * om * th.cos(),
+    ];
+    let w = [0.0, 0.0, m * l * th.cos(), m * l * th.sin()];
+    let form = |a: &[f64], b: &[f64]| a[0] * b[2] + a[1] * b[3] - a[2] * b[0] - a[3] * b[1];
+    let before = form(&u, &w);
+    for (c, s) in [(0.0, 2), (0.0, 3), (0.0, 4), (0.0, 5), (0.3, 3)] {
+        let model = CartesianPendulum { m, g, l, c };
+        let sens = Integrator::new(&model, Scheme::lobatto(s).unwrap(), 0.01)
+            .unwrap()
+            .solve(InitialState::from_velocity(q0, v0), 5.0, output::Tangents)
+            .unwrap();
+        // The map in (q, p): dv₀ = dp₀/m in, dp_T = m dv_T out.
+        let map = |x: &[f64; 4]| {
+            let d = DVector::from_vec(vec![x[0], x[1], x[2] / m, x[3] / m]);
+            let y = &sens.wrt_initial * d;
+            [y[0], y[1], m * y[2], m * y[3]]
+        };
+        let after = form(&map(&u), &map(&w));
+        let change = (after - before).abs() / before.abs();
+        println!("c = {c}, lobatto{s}: ω changed by {change:.2e}");
+        if c == 0.0 {
+            assert!(change < 1e-11, "lobatto{s}: {change:.2e}");
+        } else {
+            assert!(change > 0.1, "drag: {change:.2e}");
+        }
+    }
+}
