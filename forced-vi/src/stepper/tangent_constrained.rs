@@ -150,6 +150,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         for x in [&c1k, &rate, &kkt] {
             checked(x)?;
         }
+        // The step's own projection factored this matrix at the same point: singular here
+        // only if it was there too.
+        let kkt = kkt.lu();
+        if !kkt.is_invertible() {
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+        }
         let mut params = Vec::with_capacity(theta.len());
         for p in 0..theta.len() {
             params.push(self.parameter_terms(theta, p, (&mu, v1.as_slice()))?);
@@ -161,7 +167,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             c1k,
             kmu,
             rate,
-            kkt: kkt.lu(),
+            kkt,
             params,
         })
     }
