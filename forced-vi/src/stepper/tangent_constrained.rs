@@ -71,19 +71,29 @@ fn checked(x: &DMatrix<f64>) -> Result<(), StepFailure> {
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// The step just solved: its stages, constraints, size and start time.
+    fn solved_step(&self) -> (usize, usize, f64, f64) {
+        let h = self.state.h_prev;
+        let m = self.model.constraint_count();
+        (self.scheme.stages(), m, h, self.state.t_state - h)
+    }
+
+    /// The multipliers `ŵ_j` of control point `j ≤ s − 2` of the step just solved.
+    fn multipliers(&self, j: usize) -> Vec<f64> {
+        let (lay, z) = (self.backend.layout(), self.backend.z());
+        (0..self.model.constraint_count())
+            .map(|r| z[lay.multiplier(j, r)])
+            .collect()
+    }
+
     /// The constraint terms of the step just solved and committed (see the module docs),
     /// at its control points, multipliers and projected end.
     pub(super) fn constraint_terms(&self, theta: &[f64]) -> Result<ConstraintTerms, StepFailure> {
-        let (model, backend) = (self.model, &self.backend);
-        let sch = self.scheme;
-        let (s, m) = (sch.stages(), model.constraint_count());
-        let lay = backend.layout();
-        let h = self.state.h_prev;
-        let t0 = self.state.t_state - h;
-        let z = backend.z();
+        let (model, backend, sch) = (self.model, &self.backend, self.scheme);
+        let (s, m, h, t0) = self.solved_step();
         let x_at = |j: usize| SVector::<f64, N>::from_column_slice(backend.node_x(j));
         let t_at = |j: usize| t0 + sch.c()[j] * h;
-        let w_at = |j: usize| -> Vec<f64> { (0..m).map(|r| z[lay.multiplier(j, r)]).collect() };
+        let w_at = |j: usize| self.multipliers(j);
         let mut gval = vec![0.0; m];
         let mut g = Vec::with_capacity(s);
         for j in 0..s {
@@ -120,27 +130,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             q: Some(v1.as_slice()),
             theta: None,
         };
-        let (mut f1, mut f2, mut sec) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
         let mut rate = DMatrix::zeros(m, N);
-        let mut unit = [0.0; N];
-        for a in 0..N {
-            unit.fill(0.0);
-            unit[a] = 1.0;
-            let d2 = Direction {
-                t: 0.0,
-                q: Some(&unit),
-                theta: None,
-            };
-            constraint_second_at(
-                model,
-                (t1, q1.as_slice(), theta),
-                (along, d2),
-                (&mut f1, &mut f2, &mut sec),
-            );
-            for r in 0..m {
-                rate[(r, a)] = sec[r];
+        along_coordinates(model, (t1, q1.as_slice(), theta), along, |a, _, sec| {
+            for (r, x) in sec.iter().enumerate() {
+                rate[(r, a)] = *x;
             }
-        }
+        });
         let g1 = &g[s - 1];
         let mut kkt = DMatrix::zeros(N + m, N + m);
         kkt.view_mut((0, 0), (N, N))
@@ -180,49 +175,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         p: usize,
         (mu, v1): (&[f64], &[f64]),
     ) -> Result<ParameterTerms, StepFailure> {
-        let (model, backend) = (self.model, &self.backend);
-        let sch = self.scheme;
-        let (s, m) = (sch.stages(), model.constraint_count());
-        let lay = backend.layout();
-        let h = self.state.h_prev;
-        let t0 = self.state.t_state - h;
-        let z = backend.z();
+        let (model, backend, sch) = (self.model, &self.backend, self.scheme);
+        let (s, m, h, t0) = self.solved_step();
         let in_theta = Direction {
             t: 0.0,
             q: None,
             theta: Some(p),
         };
-        let (mut f1, mut f2, mut sec) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
-        let mut unit = [0.0; N];
         // `∂(G(x)ᵀ w)/∂θ_p` at `(t, x)`, and `∂g/∂θ_p` there.
-        let mut force_rows = |t: f64, x: &[f64], w: &[f64]| {
+        let force_rows = |t: f64, x: &[f64], w: &[f64]| {
             let mut force = DVector::zeros(N);
             let mut rows = DVector::zeros(m);
-            for a in 0..N {
-                unit.fill(0.0);
-                unit[a] = 1.0;
-                let d1 = Direction {
-                    t: 0.0,
-                    q: Some(&unit),
-                    theta: None,
-                };
-                constraint_second_at(
-                    model,
-                    (t, x, theta),
-                    (d1, in_theta),
-                    (&mut f1, &mut f2, &mut sec),
-                );
-                force[a] = (0..m).map(|r| w[r] * sec[r]).sum();
-                rows.copy_from_slice(&f2);
-            }
+            along_coordinates(model, (t, x, theta), in_theta, |a, first, sec| {
+                force[a] = w.iter().zip(sec).map(|(w, s)| w * s).sum();
+                rows.copy_from_slice(first);
+            });
             (force, rows)
         };
         let mut force = Vec::with_capacity(s - 1);
         let mut rows = Vec::with_capacity(s - 1);
         let mut end_force = DVector::zeros(N);
         for j in 0..s {
-            let w: Vec<f64> = if j + 1 < s {
-                (0..m).map(|r| z[lay.multiplier(j, r)]).collect()
+            let w = if j + 1 < s {
+                self.multipliers(j)
             } else {
                 mu.to_vec()
             };
@@ -242,6 +217,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             q: Some(v1),
             theta: None,
         };
+        let (mut f1, mut f2, mut sec) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
         constraint_second_at(
             model,
             (t1, q1, theta),
@@ -267,6 +243,30 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             end_force,
             end_rate,
         })
+    }
+}
+
+/// The constraints' derivatives at `at = (t, x, θ)` along `other`, first and mixed with
+/// each coordinate in turn: `each(a, ∂g/∂other, ∂²g/∂x_a∂other)`.
+fn along_coordinates<M: ForcedLagrangian<N>, const N: usize>(
+    model: &M,
+    at: (f64, &[f64], &[f64]),
+    other: Direction<'_>,
+    mut each: impl FnMut(usize, &[f64], &[f64]),
+) {
+    let m = model.constraint_count();
+    let (mut f1, mut f2, mut sec) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
+    let mut unit = [0.0; N];
+    for a in 0..N {
+        unit.fill(0.0);
+        unit[a] = 1.0;
+        let d = Direction {
+            t: 0.0,
+            q: Some(&unit),
+            theta: None,
+        };
+        constraint_second_at(model, at, (d, other), (&mut f1, &mut f2, &mut sec));
+        each(a, &f2, &sec);
     }
 }
 
