@@ -394,6 +394,33 @@
 //! A model written by hand declares constraints by overriding
 //! [`ForcedLagrangian::constraint_count`] and [`ForcedLagrangian::constraints`].
 //!
+//! Sensitivities of a constrained model carry its multipliers; only directions that keep
+//! the initial data on the constraints are the flow's, such as a turn about the vertical:
+//!
+//! ```
+//! use forced_vi::prelude::*;
+//! # #[forced_lagrangian(
+//! #     coordinates(x, y, z),
+//! #     lagrangian = 0.5 * m * (x_dot * x_dot + y_dot * y_dot + z_dot * z_dot) - m * g * z,
+//! #     constraints(0.5 * (x * x + y * y + z * z - l * l)),
+//! # )]
+//! # struct Spherical { m: f64, g: f64, l: f64 }
+//! let model = Spherical { m: 1.0, g: 9.81, l: 1.0 };
+//! let (q0, v0) = ([0.6, 0.0, -0.8], [0.0, 1.0, 0.0]);
+//! let end = Integrator::new(&model, Scheme::lobatto(3)?, 0.01)?
+//!     .solve(InitialState::from_velocity(q0, v0), 2.0, output::Tangents)
+//!     .map_err(|failure| failure.error)?;
+//! // The turn about the vertical of (q, v), applied to the start, comes out turned.
+//! let turn = |q: &[f64], v: &[f64]| {
+//!     nalgebra::DVector::from_vec(vec![-q[1], q[0], 0.0, -v[1], v[0], 0.0])
+//! };
+//! let moved = &end.wrt_initial * turn(&q0, &v0);
+//! assert!((moved - turn(end.q.as_slice(), end.v.as_slice())).amax() < 1e-10);
+//! // The mass scales the Lagrangian alone: the motion does not depend on it.
+//! assert!(end.wrt_parameters.column(0).amax() < 1e-10);
+//! # Ok::<(), forced_vi::Error>(())
+//! ```
+//!
 //! # Parameters and sensitivities
 //!
 //! [`output::Tangents`](crate::output::Tangents) returns, with the final state, `∂(q_T, v_T)/∂(q_0, v_0)`
