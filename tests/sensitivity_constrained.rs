@@ -423,6 +423,40 @@ fn constrained_tangents_on_the_sparse_backend_stay_refused() {
         .solve(chain.initial(), 0.01, output::Tangents)
         .expect("dense constrained tangents");
     assert!(dense.wrt_initial.iter().all(|x| x.is_finite()));
+    // `LinearPath::Auto`, which runs this chain's steps on the sparse backend, runs its
+    // sensitivities on the dense one: the same numbers, bit for bit, as the path forced.
+    let integ = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3).unwrap();
+    assert_eq!(integ.path_for(&chain.initial()), Ok(LinearPath::Sparse));
+    let auto = integ
+        .solve(chain.initial(), 0.01, output::Tangents)
+        .expect("Auto takes the dense backend for constrained tangents");
+    assert_eq!(auto.wrt_initial, dense.wrt_initial);
+    assert_eq!(auto.wrt_parameters, dense.wrt_parameters);
+    assert_eq!((auto.q, auto.p), (dense.q, dense.p));
+    // So does a loss gradient, and a plain run still takes the sparse backend.
+    let loss = |end: &forced_vi::FinalState<16>| (end.q, nalgebra::SVector::zeros());
+    let grad = integ
+        .solve(chain.initial(), 0.01, output::adjoint(loss))
+        .expect("constrained adjoint under Auto");
+    let g = DVector::from_fn(32, |i, _| if i < 16 { auto.q[i] } else { 0.0 });
+    let mine = (auto.wrt_initial.transpose() * g)
+        .iter()
+        .zip(grad.wrt_initial.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(mine < 1e-12, "{mine:.2e}");
+    assert_eq!(integ.path_for(&chain.initial()), Ok(LinearPath::Sparse));
+    // Above `CONSTRAINED_TANGENTS_DENSE_MAX_DOF` coordinates Auto keeps the sparse backend,
+    // and the run is refused before its first step.
+    const BIG: usize = 2 * LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF;
+    let big = RigidChain::<BIG>::default();
+    let refused = Integrator::new(&big, Scheme::lobatto(3).unwrap(), 1e-3)
+        .unwrap()
+        .solve(big.initial(), 0.01, output::Tangents);
+    assert!(matches!(
+        refused.map_err(|f| f.error),
+        Err(forced_vi::Error::UnsupportedConstraints { .. })
+    ));
 }
 
 /// Without forces the constrained Lobatto map is symplectic on the constraints (RATTLE and

@@ -7,6 +7,8 @@
 //! the sparse backend at `N = 1024`, whose code shares the stepper with the dense one (a dense
 //! call inlined into that shared code once put 8 MiB blocks on its frame).
 //!
+//! The sensitivity outputs too, on a constrained 64-coordinate chain and at the largest `N`.
+//!
 //! A test binary of its own, without libtest's harness, so that the main thread is one of
 //! the threads tested (libtest runs tests on threads of its own):
 //! `cargo test --release -p forced-vi-models --test trust_dense_stack`.
@@ -14,6 +16,7 @@
 use forced_vi::prelude::*;
 use forced_vi::{Error, LinearPath};
 use forced_vi_models::models::SpringChain;
+use forced_vi_models::rigid_chain::RigidChain;
 
 const H: f64 = 0.02;
 /// Two steps: the second `next()` of the reproducer is a step of a running stepper.
@@ -104,6 +107,36 @@ fn too_large_for_dense() {
     assert!(auto.final_state(initial(), T).is_ok());
 }
 
+/// The sensitivity outputs on large dense models: the tangent (`output::Tangents`) and the
+/// loss gradient (`output::adjoint`) evaluate the node blocks before the first step, after
+/// the last, and through the backward pass, outside the steps themselves; each runs on the
+/// step's stack too (a 64-coordinate rigid chain, whose general kernels take the blocks
+/// with second-order dual numbers in 128 directions, aborted on the main thread's 8 MiB).
+/// The constrained chain on the dense backend, forced and under `Auto` (which takes it for
+/// the sensitivities of a constrained model of this size), and the unconstrained spring
+/// chain at the largest `N` the dense path takes, whose gradient is a backward pass.
+fn sensitivities_of_large_dense_models() {
+    const N: usize = LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF;
+    let chain = RigidChain::<N>::default();
+    let init = chain.initial();
+    let h = 1e-3;
+    let integ = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), h).unwrap();
+    let loss = |end: &forced_vi::FinalState<N>| (end.q, end.v);
+    for path in [LinearPath::Dense, LinearPath::Auto] {
+        let integ = integ.clone().linear_path(path);
+        let sens = integ.solve(init, 2.0 * h, output::Tangents).unwrap();
+        assert!(sens.wrt_initial.iter().all(|x| x.is_finite()), "{path:?}");
+        let grad = integ.solve(init, 2.0 * h, output::adjoint(loss)).unwrap();
+        assert!(grad.wrt_initial.iter().all(|x| x.is_finite()), "{path:?}");
+    }
+    const M: usize = LinearPath::DENSE_MAX_DOF;
+    let springs = SpringChain::<M>::DEFAULT;
+    let integ = dense(&springs);
+    let loss = |end: &forced_vi::FinalState<M>| (end.q, end.v);
+    let grad = integ.solve(initial(), T, output::adjoint(loss)).unwrap();
+    assert!(grad.wrt_initial.iter().all(|x| x.is_finite()));
+}
+
 /// Runs `f` on the main thread and, at the same time (the test takes half the wall time on
 /// two cores), on a thread with a 2 MiB stack.
 fn on_both_threads(name: &str, f: fn()) {
@@ -131,4 +164,8 @@ fn main() {
         every_method::<1024>(LinearPath::Sparse);
     });
     on_both_threads("trust_dense_model_too_large", too_large_for_dense);
+    on_both_threads(
+        "trust_dense_sensitivities_of_large_models",
+        sensitivities_of_large_dense_models,
+    );
 }

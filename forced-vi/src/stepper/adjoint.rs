@@ -95,6 +95,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// the run, at its final state with the velocity solved.
     pub(crate) fn adjoint(
         &mut self,
+        g: (&[f64], &[f64]),
+    ) -> Result<(DVector<f64>, DVector<f64>), Error> {
+        // On the step's stack: each step of the backward pass takes the node blocks (see
+        // [`super::step_stack_bytes`]).
+        with_stack(self.stack, || self.adjoint_here(g))
+    }
+
+    fn adjoint_here(
+        &mut self,
         (gq, gv): (&[f64], &[f64]),
     ) -> Result<(DVector<f64>, DVector<f64>), Error> {
         let Some(tape) = self.tape.take() else {

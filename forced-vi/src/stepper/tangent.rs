@@ -68,6 +68,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// parameters `θ`: `2N + P` columns, `dp_0 = C dq_0 + E dv_0 + ∂L_v/∂θ dθ` (DESIGN §12).
     /// Only before the first step.
     pub(crate) fn track_tangent(&mut self) -> Result<(), Error> {
+        // On the step's stack: the momentum's tangent takes the node blocks (see
+        // [`super::step_stack_bytes`]).
+        with_stack(self.stack, || self.track_tangent_here())
+    }
+
+    fn track_tangent_here(&mut self) -> Result<(), Error> {
         if M::CONSTRAINED
             && self.model.constraint_count() > 0
             && !self.backend.constrained_tangents()
@@ -171,6 +177,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// `(t, q, v)` (after the final velocity solve): the columns of the initial data
     /// (`2N × 2N`) and those of the parameters (`2N × P`).
     pub(crate) fn tangent_in_velocities(&mut self) -> Result<(DMatrix<f64>, DMatrix<f64>), Error> {
+        // On the step's stack, as `track_tangent`: the velocity's tangent takes the blocks.
+        with_stack(self.stack, || self.tangent_in_velocities_here())
+    }
+
+    fn tangent_in_velocities_here(&mut self) -> Result<(DMatrix<f64>, DMatrix<f64>), Error> {
         let Some(tg) = self.tangent.as_ref() else {
             return Ok((DMatrix::zeros(2 * N, 0), DMatrix::zeros(2 * N, 0)));
         };
