@@ -87,8 +87,20 @@ fn end_state<M: ForcedLagrangian<N>, const N: usize>(
     x: &[f64],
     (scheme, h, t_final): (&Scheme, f64, f64),
 ) -> DVector<f64> {
+    end_state_on(case, x, (scheme, h, t_final), LinearPath::Auto)
+}
+
+/// [`end_state`] on the backend of `path`.
+fn end_state_on<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    x: &[f64],
+    (scheme, h, t_final): (&Scheme, f64, f64),
+    path: LinearPath,
+) -> DVector<f64> {
     let (model, q0, v0) = (case.build)(x);
-    let integ = Integrator::new(&model, scheme.clone(), h).expect("an integrator");
+    let integ = Integrator::new(&model, scheme.clone(), h)
+        .expect("an integrator")
+        .linear_path(path);
     let end = integ
         .final_state(InitialState::from_velocity(q0, v0), t_final)
         .expect("a run from data on the constraints");
@@ -137,6 +149,17 @@ fn tangents<M: ForcedLagrangian<N>, const N: usize>(
     (h, adaptive): (f64, bool),
     t_final: f64,
 ) -> forced_vi::Sensitivities<N> {
+    tangents_on(case, scheme, (h, adaptive), t_final, LinearPath::Auto)
+}
+
+/// [`tangents`] on the backend of `path`.
+fn tangents_on<M: ForcedLagrangian<N>, const N: usize>(
+    case: &Case<M, N>,
+    scheme: &Scheme,
+    (h, adaptive): (f64, bool),
+    t_final: f64,
+    path: LinearPath,
+) -> forced_vi::Sensitivities<N> {
     let (model, q0, v0) = (case.build)(&case.x);
     let integ = if adaptive {
         Integrator::adaptive(&model, scheme.clone(), h, h)
@@ -145,6 +168,7 @@ fn tangents<M: ForcedLagrangian<N>, const N: usize>(
     };
     let sens = integ
         .expect("an integrator")
+        .linear_path(path)
         .solve(
             InitialState::from_velocity(q0, v0),
             t_final,
@@ -160,9 +184,10 @@ fn tangents<M: ForcedLagrangian<N>, const N: usize>(
 fn tangent_error<M: ForcedLagrangian<N>, const N: usize>(
     case: &Case<M, N>,
     (scheme, h, t_final): (&Scheme, f64, f64),
+    path: LinearPath,
 ) -> f64 {
     let run = (scheme, h, t_final);
-    let sens = tangents(case, scheme, (h, false), t_final);
+    let sens = tangents_on(case, scheme, (h, false), t_final, path);
     let tangent = along_x(case, &sens);
     let (mut worst, mut size) = (0.0f64, 0.0f64);
     for i in 0..case.x.len() {
@@ -172,7 +197,9 @@ fn tangent_error<M: ForcedLagrangian<N>, const N: usize>(
             x[i] += sign * d;
             x
         };
-        let diff = (end_state(case, &at(1.0), run) - end_state(case, &at(-1.0), run)) / (2.0 * d);
+        let diff = (end_state_on(case, &at(1.0), run, path)
+            - end_state_on(case, &at(-1.0), run, path))
+            / (2.0 * d);
         worst = worst.max((tangent.column(i) - &diff).amax());
         size = size.max(diff.amax());
     }
@@ -258,18 +285,24 @@ fn the_parameter_names_follow_the_fields() {
 
 #[test]
 fn constrained_tangents_match_central_differences() {
-    for s in 2..=5 {
-        let scheme = Scheme::lobatto(s).unwrap();
-        let run = (&scheme, 0.02, 1.5);
-        let e1 = tangent_error(&pendulum_case(), run);
-        let e2 = tangent_error(&swinging_case(), run);
-        let e3 = tangent_error(&double_case(), (&scheme, 0.02, 1.0));
-        println!("lobatto{s}: pendulum {e1:.2e}, swinging pivot {e2:.2e}, double {e3:.2e}");
-        // Measured: 1e-11 to 1.5e-10, the differences' own round-off (`ε |x| / δ`). With
-        // the step polynomial's end slope in place of the projected velocity, 3e-6
-        // (lobatto4) to 8.6e-3 (lobatto2).
-        for (name, e) in [("pendulum", e1), ("swinging", e2), ("double", e3)] {
-            assert!(e < 1e-8, "lobatto{s} {name}: {e:.2e}");
+    // On both backends: the sparse one takes its terms from its own kernels (the
+    // constraints' `G` and curvature, the end's blocks and saddle-point factors).
+    for path in [LinearPath::Dense, LinearPath::Sparse] {
+        for s in 2..=5 {
+            let scheme = Scheme::lobatto(s).unwrap();
+            let run = (&scheme, 0.02, 1.5);
+            let e1 = tangent_error(&pendulum_case(), run, path);
+            let e2 = tangent_error(&swinging_case(), run, path);
+            let e3 = tangent_error(&double_case(), (&scheme, 0.02, 1.0), path);
+            println!(
+                "{path:?} lobatto{s}: pendulum {e1:.2e}, swinging pivot {e2:.2e}, double {e3:.2e}"
+            );
+            // Measured: 1e-11 to 1.5e-10, the differences' own round-off (`ε |x| / δ`).
+            // With the step polynomial's end slope in place of the projected velocity,
+            // 3e-6 (lobatto4) to 8.6e-3 (lobatto2).
+            for (name, e) in [("pendulum", e1), ("swinging", e2), ("double", e3)] {
+                assert!(e < 1e-8, "{path:?} lobatto{s} {name}: {e:.2e}");
+            }
         }
     }
 }
@@ -405,58 +438,38 @@ fn constrained_adjoint_matches_central_differences() {
     assert!(worst < 1e-8, "{worst:.2e}");
 }
 
+/// The rigid chain's hand-written sparse kernels (`G`, the curvature, the node blocks) on
+/// the sparse backend against the dense backend's dual numbers over all coordinates: the
+/// tangent and the loss gradient to round-off, lobatto2..5. A chain of 256 links (512
+/// coordinates), beyond what the dense tangent can take, runs too.
 #[test]
-fn constrained_tangents_on_the_sparse_backend_stay_refused() {
+fn constrained_tangents_on_the_sparse_backend_match_the_dense_backend() {
     let chain = RigidChain::<16>::default();
-    let sparse = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3)
-        .unwrap()
-        .linear_path(LinearPath::Sparse)
-        .solve(chain.initial(), 0.01, output::Tangents);
-    assert!(matches!(
-        sparse.map_err(|f| f.error),
-        Err(forced_vi::Error::UnsupportedConstraints { .. })
-    ));
-    // The same chain on the dense backend carries them.
-    let dense = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3)
-        .unwrap()
-        .linear_path(LinearPath::Dense)
-        .solve(chain.initial(), 0.01, output::Tangents)
-        .expect("dense constrained tangents");
-    assert!(dense.wrt_initial.iter().all(|x| x.is_finite()));
-    // `LinearPath::Auto`, which runs this chain's steps on the sparse backend, runs its
-    // sensitivities on the dense one: the same numbers, bit for bit, as the path forced.
-    let integ = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), 1e-3).unwrap();
-    assert_eq!(integ.path_for(&chain.initial()), Ok(LinearPath::Sparse));
-    let auto = integ
-        .solve(chain.initial(), 0.01, output::Tangents)
-        .expect("Auto takes the dense backend for constrained tangents");
-    assert_eq!(auto.wrt_initial, dense.wrt_initial);
-    assert_eq!(auto.wrt_parameters, dense.wrt_parameters);
-    assert_eq!((auto.q, auto.p), (dense.q, dense.p));
-    // So does a loss gradient, and a plain run still takes the sparse backend.
-    let loss = |end: &forced_vi::FinalState<16>| (end.q, nalgebra::SVector::zeros());
-    let grad = integ
-        .solve(chain.initial(), 0.01, output::adjoint(loss))
-        .expect("constrained adjoint under Auto");
-    let g = DVector::from_fn(32, |i, _| if i < 16 { auto.q[i] } else { 0.0 });
-    let mine = (auto.wrt_initial.transpose() * g)
-        .iter()
-        .zip(grad.wrt_initial.iter())
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
-    assert!(mine < 1e-12, "{mine:.2e}");
-    assert_eq!(integ.path_for(&chain.initial()), Ok(LinearPath::Sparse));
-    // Above `CONSTRAINED_TANGENTS_DENSE_MAX_DOF` coordinates Auto keeps the sparse backend,
-    // and the run is refused before its first step.
-    const BIG: usize = 2 * LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF;
-    let big = RigidChain::<BIG>::default();
-    let refused = Integrator::new(&big, Scheme::lobatto(3).unwrap(), 1e-3)
-        .unwrap()
-        .solve(big.initial(), 0.01, output::Tangents);
-    assert!(matches!(
-        refused.map_err(|f| f.error),
-        Err(forced_vi::Error::UnsupportedConstraints { .. })
-    ));
+    let init = chain.initial();
+    for s in 2..=5 {
+        let integ = Integrator::new(&chain, Scheme::lobatto(s).unwrap(), 2e-3).unwrap();
+        assert_eq!(integ.path_for(&init), Ok(LinearPath::Sparse));
+        let sparse = integ.solve(init, 0.1, output::Tangents).unwrap();
+        let dense = integ
+            .clone()
+            .linear_path(LinearPath::Dense)
+            .solve(init, 0.1, output::Tangents)
+            .unwrap();
+        let off = (&sparse.wrt_initial - &dense.wrt_initial).amax() / dense.wrt_initial.amax();
+        println!("lobatto{s}: sparse against dense {off:.2e}");
+        // Measured: 7.9e-14 to 2e-13.
+        assert!(off < 1e-11, "lobatto{s}: {off:.2e}");
+        let loss = |end: &forced_vi::FinalState<16>| (end.q, nalgebra::SVector::zeros());
+        let grad = integ.solve(init, 0.1, output::adjoint(loss)).unwrap();
+        let g = DVector::from_fn(32, |i, _| if i < 16 { sparse.q[i] } else { 0.0 });
+        let mine = (sparse.wrt_initial.transpose() * g - &grad.wrt_initial).amax();
+        assert!(mine < 1e-12 * grad.wrt_initial.amax(), "{mine:.2e}");
+    }
+    let big = RigidChain::<512>::default();
+    let integ = Integrator::new(&big, Scheme::lobatto(3).unwrap(), 1e-3).unwrap();
+    let sens = integ.solve(big.initial(), 3e-3, output::Tangents).unwrap();
+    assert_eq!(sens.wrt_initial.shape(), (1024, 1024));
+    assert!(sens.wrt_initial.iter().all(|x| x.is_finite()));
 }
 
 /// Without forces the constrained Lobatto map is symplectic on the constraints (RATTLE and

@@ -7,7 +7,8 @@
 //! the sparse backend at `N = 1024`, whose code shares the stepper with the dense one (a dense
 //! call inlined into that shared code once put 8 MiB blocks on its frame).
 //!
-//! The sensitivity outputs too, on a constrained 64-coordinate chain and at the largest `N`.
+//! The sensitivity outputs too, on a constrained 64-coordinate chain (both backends) and at
+//! the largest `N`.
 //!
 //! A test binary of its own, without libtest's harness, so that the main thread is one of
 //! the threads tested (libtest runs tests on threads of its own):
@@ -112,17 +113,17 @@ fn too_large_for_dense() {
 /// the last, and through the backward pass, outside the steps themselves; each runs on the
 /// step's stack too (a 64-coordinate rigid chain, whose general kernels take the blocks
 /// with second-order dual numbers in 128 directions, aborted on the main thread's 8 MiB).
-/// The constrained chain on the dense backend, forced and under `Auto` (which takes it for
-/// the sensitivities of a constrained model of this size), and the unconstrained spring
-/// chain at the largest `N` the dense path takes, whose gradient is a backward pass.
+/// The constrained chain on the dense backend and on the sparse one (which shares the
+/// stepper), and the unconstrained spring chain at the largest `N` the dense path takes,
+/// whose gradient is a backward pass.
 fn sensitivities_of_large_dense_models() {
-    const N: usize = LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF;
+    const N: usize = 64;
     let chain = RigidChain::<N>::default();
     let init = chain.initial();
     let h = 1e-3;
     let integ = Integrator::new(&chain, Scheme::lobatto(3).unwrap(), h).unwrap();
     let loss = |end: &forced_vi::FinalState<N>| (end.q, end.v);
-    for path in [LinearPath::Dense, LinearPath::Auto] {
+    for path in [LinearPath::Dense, LinearPath::Sparse] {
         let integ = integ.clone().linear_path(path);
         let sens = integ.solve(init, 2.0 * h, output::Tangents).unwrap();
         assert!(sens.wrt_initial.iter().all(|x| x.is_finite()), "{path:?}");

@@ -342,10 +342,8 @@
 //! initial data on the constraints are the flow's; the tangent maps others as the discrete
 //! map's extension, which depends on the step. A loss gradient
 //! ([`output::adjoint`](crate::output::adjoint)) of a constrained model comes from that
-//! tangent, at its cost. Non-Lobatto schemes and sensitivities of a constrained model on
-//! the sparse backend are [`Error::UnsupportedConstraints`]; [`LinearPath::Auto`] runs
-//! those sensitivities on the dense backend up to
-//! [`LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF`] coordinates. A large model runs on the sparse backend when its
+//! tangent, at its cost, on either backend. Non-Lobatto schemes are
+//! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
 //! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),
 //! [`SparseNode::eval_constraints`](crate::model::SparseNode::eval_constraints)); for a model

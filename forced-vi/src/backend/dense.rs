@@ -765,4 +765,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     fn constrained_tangents(&self) -> bool {
         true
     }
+    // The stepper makes a dense step's terms from the model (`tangent_constrained`).
+    fn sparse_constraint_terms(
+        &mut self,
+    ) -> Result<Option<super::SparseConstraintTerms>, StepFailure> {
+        Ok(None)
+    }
+    fn solve_end_projection(&mut self, _rhs: &mut [f64]) -> bool {
+        false
+    }
 }

@@ -274,6 +274,58 @@ pub(crate) trait StepBackend {
     /// Whether [`Self::linearize`] and [`Self::solve_linearized`] carry a constrained
     /// step's multipliers and constraint rows (the tangent of a constrained model).
     fn constrained_tangents(&self) -> bool;
+    /// The constraint terms of the tangent of the constrained step just solved and
+    /// linearised, on the backend's sparse patterns, with the end projection's matrix
+    /// factored for [`Self::solve_end_projection`] (see `crate::stepper`'s
+    /// `tangent_constrained`); `None` where the stepper makes them from the model's dense
+    /// kernels (the dense backend).
+    fn sparse_constraint_terms(&mut self) -> Result<Option<SparseConstraintTerms>, StepFailure>;
+    /// Solves `[[E₁, G₁ᵀ], [G₁, 0]] x = rhs` in place with the factors of the last
+    /// [`Self::sparse_constraint_terms`]; false without them.
+    fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool;
+}
+
+/// A constrained step's terms for its tangent on sparse patterns (see
+/// [`StepBackend::sparse_constraint_terms`]): `G(x_j)` at the `s` control points, the
+/// curvatures `K_j = Σ_r ŵ_{j,r} ∂²g_r(x_j)` at the first `s − 1`, and at the projected end
+/// `(q₁, v₁)` with the impulse `μ̂`: `C₁ + K_μ` and `K_μ = Σ_r μ̂_r ∂²g_r(q₁)`.
+pub(crate) struct SparseConstraintTerms {
+    /// The entries `(k, a)` of `G` (`m × N`).
+    pub(crate) g_entries: Vec<(usize, usize)>,
+    /// `G(x_j)`'s values, per control point.
+    pub(crate) g: Vec<Vec<f64>>,
+    /// The entries `(r, c)` of the node pattern, on which the curvatures and `C` live.
+    pub(crate) node_entries: Vec<(usize, usize)>,
+    /// `K_j`'s values, `j = 0 … s − 2`.
+    pub(crate) k: Vec<Vec<f64>>,
+    /// `C₁ + K_μ` and `K_μ`.
+    pub(crate) c1k: Vec<f64>,
+    pub(crate) kmu: Vec<f64>,
+    /// The projected end velocity `v₁`.
+    pub(crate) v1: Vec<f64>,
+}
+
+impl SparseConstraintTerms {
+    /// `out = M x` for a matrix on `entries` with `values`.
+    pub(crate) fn times(entries: &[(usize, usize)], values: &[f64], x: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        for (&(r, c), v) in entries.iter().zip(values) {
+            out[r] += v * x[c];
+        }
+    }
+
+    /// `out = Mᵀ y` for a matrix on `entries` with `values`.
+    pub(crate) fn times_transposed(
+        entries: &[(usize, usize)],
+        values: &[f64],
+        y: &[f64],
+        out: &mut [f64],
+    ) {
+        out.fill(0.0);
+        for (&(r, c), v) in entries.iter().zip(values) {
+            out[c] += v * y[r];
+        }
+    }
 }
 
 /// The backend of a run: dense or sparse.
@@ -559,5 +611,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn constrained_tangents(&self) -> bool {
         forward!(self, b => b.constrained_tangents())
+    }
+    fn sparse_constraint_terms(&mut self) -> Result<Option<SparseConstraintTerms>, StepFailure> {
+        forward!(self, b => b.sparse_constraint_terms())
+    }
+    fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool {
+        forward!(self, b => b.solve_end_projection(rhs))
     }
 }

@@ -35,6 +35,10 @@ pub(crate) struct SparseBackend<'a> {
     /// constraint forces over the last step and its end multipliers `h² λ_{s−1}` (as in
     /// the dense backend).
     saddle: Option<Saddle>,
+    /// A constrained step's end projection linearised at its end, for its tangent (see
+    /// [`StepBackend::sparse_constraint_terms`]), and whether it is factored.
+    end_tangent: Option<Box<Saddle>>,
+    end_factored: bool,
     impulse: Vec<f64>,
     mu: Vec<f64>,
     ptil: Vec<f64>,
@@ -108,6 +112,8 @@ impl<'a> SparseBackend<'a> {
             carry: false,
             mu: vec![0.0; m],
             saddle,
+            end_tangent: None,
+            end_factored: false,
             rate,
             rate_at: vec![0.0; m],
         })
@@ -502,8 +508,108 @@ impl StepBackend for SparseBackend<'_> {
     fn deep_stack(&self) -> bool {
         false
     }
-    // Its saddle-point solves are the step's alone, so far.
     fn constrained_tangents(&self) -> bool {
-        false
+        true
+    }
+
+    fn sparse_constraint_terms(
+        &mut self,
+    ) -> Result<Option<super::SparseConstraintTerms>, StepFailure> {
+        let (Some(saddle), Some(mut cons)) = (self.saddle.as_ref(), self.prob.cons.take()) else {
+            return Ok(None);
+        };
+        let terms = self.constraint_terms_on(&mut cons, &saddle.v.clone());
+        self.prob.cons = Some(cons);
+        terms.map(Some)
+    }
+
+    fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool {
+        match self.end_tangent.as_mut() {
+            Some(saddle) if self.end_factored => {
+                saddle.solve(rhs);
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+impl SparseBackend<'_> {
+    /// [`StepBackend::sparse_constraint_terms`] with the step's constraints `cons` (taken
+    /// out of the step for the call) and the projected end velocity `v1`: at the control
+    /// points of the last linearisation, with the step's multipliers, and at the end, whose
+    /// projection matrix is factored again at `(q₁, v₁)` (the step's own factors are those
+    /// of its last iterate).
+    fn constraint_terms_on(
+        &mut self,
+        cons: &mut crate::sparse::constraints::StepConstraints,
+        v1: &[f64],
+    ) -> Result<super::SparseConstraintTerms, StepFailure> {
+        self.end_factored = false;
+        let prob = &self.prob;
+        let (sch, h, n, m) = (prob.scheme, prob.h, prob.n, cons.m);
+        let (s, s1) = (sch.stages(), sch.stages() - 1);
+        let nz = n * s1;
+        let node = prob.node.get();
+        let mut lambda = vec![0.0; m];
+        let (mut g, mut k) = (Vec::with_capacity(s), Vec::with_capacity(s1));
+        let mut kmu = Vec::new();
+        let failed = |f: NewtonFailure| StepFailure::Newton(f);
+        for j in 0..s {
+            let t = prob.t0 + sch.c()[j] * h;
+            let x = &prob.xs[j * n..(j + 1) * n];
+            if j < s1 {
+                for (kk, l) in lambda.iter_mut().enumerate() {
+                    *l = self.z[nz + kk * s1 + j];
+                }
+            } else {
+                // The impulse `μ̂ = (b_{s−1}/h) ŵ_{s−1}`.
+                let wb = sch.b()[s1] / h;
+                for (l, w) in lambda.iter_mut().zip(&self.mu) {
+                    *l = wb * w;
+                }
+            }
+            cons.eval(node, &prob.pattern, (j, t, x), &lambda)
+                .map_err(failed)?;
+            g.push(cons.jac_at(j).to_vec());
+            if j < s1 {
+                k.push(cons.curvature.clone());
+            } else {
+                kmu = cons.curvature.clone();
+            }
+        }
+        // `C₁` and `E₁` at the projected end.
+        let (t1, q1) = (prob.t0 + h, &prob.xs[s1 * n..s * n]);
+        let (mut lq_f, mut lv) = (vec![0.0; n], vec![0.0; n]);
+        let mut blocks = crate::model::NodeBlocks::zeros(prob.pattern.nnz());
+        let mut sink = NodeSink::values(&mut lq_f, &mut lv, &prob.pattern, &mut blocks);
+        node.eval(t1, q1, v1, &mut sink);
+        let outside = sink.outside();
+        let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
+        if outside || !(finite(&blocks.c) && finite(&blocks.e)) {
+            return Err(failed(NewtonFailure::NonFinite));
+        }
+        let c1k: Vec<f64> = blocks.c.iter().zip(&kmu).map(|(c, k)| c + k).collect();
+        let g_pattern = &cons.pattern;
+        if self.end_tangent.is_none() {
+            let saddle = Saddle::new(&prob.pattern, g_pattern)
+                .map_err(|_| failed(NewtonFailure::SingularJacobian))?;
+            self.end_tangent = Some(Box::new(saddle));
+        }
+        if let Some(saddle) = self.end_tangent.as_mut() {
+            saddle
+                .factor_with(&prob.pattern, &blocks.e, &g[s1])
+                .map_err(failed)?;
+            self.end_factored = true;
+        }
+        Ok(super::SparseConstraintTerms {
+            g_entries: g_pattern.entries().collect(),
+            g,
+            node_entries: prob.pattern.entries().collect(),
+            k,
+            c1k,
+            kmu,
+            v1: v1.to_vec(),
+        })
     }
 }

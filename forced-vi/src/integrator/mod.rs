@@ -306,26 +306,15 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// first, that holds only the current state. It runs on the backend that
     /// [`LinearPath`] chooses (see [`Self::path_for`]), like every run method.
     pub fn stepper(&self, init: InitialState<N>, t_final: f64) -> Result<Stepper<'_, M, N>, Error> {
-        self.stepper_on(init, t_final, self.linear_path)
-    }
-
-    /// [`Self::stepper`] on the backend of `path` (see [`Self::run_path`]).
-    pub(crate) fn stepper_on(
-        &self,
-        init: InitialState<N>,
-        t_final: f64,
-        path: LinearPath,
-    ) -> Result<Stepper<'_, M, N>, Error> {
         let init = &init;
-        crate::stack::with_run_stack::<N, _>(move || self.stepper_here(*init, t_final, path))
+        crate::stack::with_run_stack::<N, _>(move || self.stepper_here(*init, t_final))
     }
 
-    /// [`Self::stepper_on`] on the current stack.
+    /// [`Self::stepper`] on the current stack.
     fn stepper_here(
         &self,
         init: InitialState<N>,
         t_final: f64,
-        path: LinearPath,
     ) -> Result<Stepper<'_, M, N>, Error> {
         // Tolerances made without their constructors (public fields, or deserialized) are
         // checked here, before any step, as `Tolerance::per_component` checks them.
@@ -333,12 +322,10 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             tol.check()?;
         }
         let newton = self.options.newton;
-        let backend = self.backend(&init, &self.scheme, newton, path)?;
+        let backend = self.backend(&init, &self.scheme, newton)?;
         // The error estimate's one Newton iteration (see `crate::control`).
         let reference = match (&self.tolerance, &self.reference) {
-            (Some(_), Some(sch)) => {
-                Some(self.backend(&init, sch, newton.max_iterations(1), path)?)
-            }
+            (Some(_), Some(sch)) => Some(self.backend(&init, sch, newton.max_iterations(1))?),
             _ => None,
         };
         let setup = RunSetup {

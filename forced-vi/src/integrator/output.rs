@@ -115,11 +115,10 @@ pub fn each_step<const N: usize, F: FnMut(&StepRecord<N>)>(f: F) -> EachStep<F> 
 /// `2N + P` linear solves per step on top of the run, on either backend. With tolerances the
 /// step sequence is held fixed: the result is the derivative of the same steps from
 /// perturbed data. A constrained model carries its multipliers and its end projection
-/// through the tangent too (dense backend: [`LinearPath::Auto`](crate::LinearPath::Auto)
-/// takes it for such a run up to
-/// [`CONSTRAINED_TANGENTS_DENSE_MAX_DOF`](crate::LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF)
-/// coordinates; the sparse one refuses it with [`Error::UnsupportedConstraints`]); only directions of `(q_0, v_0)` that keep the
-/// initial data on the constraints are derivatives of the flow.
+/// through the tangent too, on either backend (the sparse one from its own kernels: the
+/// constraints' `G` and curvature, the end's blocks and saddle-point factors); only
+/// directions of `(q_0, v_0)` that keep the initial data on the constraints are
+/// derivatives of the flow.
 ///
 /// ```
 /// use forced_vi::prelude::*;
@@ -310,7 +309,7 @@ impl<const N: usize> Output<N> for Tangents {
         t_final: f64,
     ) -> Result<Sensitivities<N>, RunFailure<N>> {
         refuse_large(integ)?;
-        open_tracked(integ, slot, init, t_final, |stepper| {
+        open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
             let end = to_the_end(stepper)?;
@@ -386,7 +385,7 @@ fn constrained_adjoint<'s, M: ForcedLagrangian<N>, const N: usize, F>(
 where
     F: FnOnce(&FinalState<N>) -> (SVector<f64, N>, SVector<f64, N>),
 {
-    open_tracked(integ, slot, init, t_final, |stepper| {
+    open(integ, slot, init, t_final, |stepper| {
         stepper.set_lean(true);
         stepper.track_tangent().map_err(|e| stepper.failure(e))?;
         let end = to_the_end(stepper)?;
@@ -442,31 +441,8 @@ fn open<'s, M: ForcedLagrangian<N>, const N: usize, R>(
     t_final: f64,
     visit: impl FnOnce(&mut Stepper<'s, M, N>) -> Result<R, RunFailure<N>>,
 ) -> Result<R, RunFailure<N>> {
-    open_on(integ.linear_path, integ, slot, (init, t_final), visit)
-}
-
-/// [`open`] for a run that tracks the sensitivities of its steps: on the backend of
-/// [`Integrator::run_path`].
-fn open_tracked<'s, M: ForcedLagrangian<N>, const N: usize, R>(
-    integ: &'s Integrator<'_, M, N>,
-    slot: &mut Slot<'s, M, N>,
-    init: InitialState<N>,
-    t_final: f64,
-    visit: impl FnOnce(&mut Stepper<'s, M, N>) -> Result<R, RunFailure<N>>,
-) -> Result<R, RunFailure<N>> {
-    open_on(integ.run_path(true), integ, slot, (init, t_final), visit)
-}
-
-/// [`open`] on the backend of `path`.
-fn open_on<'s, M: ForcedLagrangian<N>, const N: usize, R>(
-    path: crate::LinearPath,
-    integ: &'s Integrator<'_, M, N>,
-    slot: &mut Slot<'s, M, N>,
-    (init, t_final): (InitialState<N>, f64),
-    visit: impl FnOnce(&mut Stepper<'s, M, N>) -> Result<R, RunFailure<N>>,
-) -> Result<R, RunFailure<N>> {
     // Only where the backend does not depend on the initial state: a restart keeps it.
-    let keep = integ.dense_for_every_start(path);
+    let keep = integ.dense_for_every_start();
     if let Some(stepper) = slot.as_mut().filter(|_| keep) {
         match stepper.restart(init, t_final) {
             Ok(true) => return visit(stepper),
@@ -479,9 +455,7 @@ fn open_on<'s, M: ForcedLagrangian<N>, const N: usize, R>(
     }
     *slot = None;
     let stepper = slot.insert(Box::new(
-        integ
-            .stepper_on(init, t_final, path)
-            .map_err(RunFailure::new)?,
+        integ.stepper(init, t_final).map_err(RunFailure::new)?,
     ));
     visit(stepper)
 }

@@ -66,13 +66,6 @@ impl LinearPath {
     /// n = 256 against 0.9 ms sparse, and about 3 s predicted at n = 1024; the dense
     /// backend's every run method at `N = 512` is `tests/trust_dense_stack.rs`.
     pub const DENSE_MAX_DOF: usize = 512;
-    /// The most coordinates for which [`LinearPath::Auto`] runs the sensitivities of a
-    /// constrained model (`output::Tangents`, `output::adjoint`) on the dense backend where
-    /// it would take the sparse one, whose steps do not carry them yet
-    /// ([`Error::UnsupportedConstraints`] there, and above this size). The dense tangent
-    /// takes the constraints' second derivatives with dual numbers over all `N`
-    /// coordinates; see `tests/sensitivity_constrained.rs` for what it costs.
-    pub const CONSTRAINED_TANGENTS_DENSE_MAX_DOF: usize = 64;
 }
 
 impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
@@ -80,7 +73,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// [`LinearPath::Sparse`]), or why it cannot run.
     pub fn path_for(&self, init: &InitialState<N>) -> Result<LinearPath, Error> {
         Ok(
-            match self.backend(init, &self.scheme, self.options.newton, self.linear_path)? {
+            match self.backend(init, &self.scheme, self.options.newton)? {
                 Backend::Dense(_) => LinearPath::Dense,
                 #[cfg(feature = "sparse")]
                 Backend::Sparse(_) => LinearPath::Sparse,
@@ -92,8 +85,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     /// stepper can be restarted from any other (see [`Integrator::runs`]): the sparse
     /// backend's pattern, and with [`LinearPath::Auto`] the choice of backend itself, depend
     /// on the initial state.
-    pub(super) fn dense_for_every_start(&self, path: LinearPath) -> bool {
-        match path {
+    pub(super) fn dense_for_every_start(&self) -> bool {
+        match self.linear_path {
             LinearPath::Dense => true,
             LinearPath::Sparse => false,
             LinearPath::Auto => {
@@ -102,37 +95,22 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         }
     }
 
-    /// The linear path of a run that tracks the sensitivities of its steps (`tangents`):
-    /// [`LinearPath::Auto`] takes the dense backend for a constrained model of at most
-    /// [`LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF`] coordinates, the backend whose
-    /// steps carry them; otherwise the integrator's path.
-    pub(super) fn run_path(&self, tangents: bool) -> LinearPath {
-        let constrained = M::CONSTRAINED && self.model.constraint_count() > 0;
-        let small = N <= LinearPath::CONSTRAINED_TANGENTS_DENSE_MAX_DOF;
-        if tangents && constrained && small && self.linear_path == LinearPath::Auto {
-            LinearPath::Dense
-        } else {
-            self.linear_path
-        }
-    }
-
-    /// The backend of a run from `init` with `scheme` on `path`, with its buffers.
+    /// The backend of a run from `init` with `scheme`, with its buffers.
     pub(super) fn backend<'s>(
         &'s self,
         init: &InitialState<N>,
         scheme: &'s Scheme,
         newton: NewtonOptions,
-        path: LinearPath,
     ) -> Result<Backend<'s, M, N>, Error> {
         if self.model.constraint_count() > 0 {
             check_constrained(self.model, scheme)?;
         }
         #[cfg(feature = "sparse")]
-        if let Some(backend) = self.sparse_backend(init, scheme, newton, path)? {
+        if let Some(backend) = self.sparse_backend(init, scheme, newton)? {
             return Ok(Backend::Sparse(Box::new(backend)));
         }
         #[cfg(not(feature = "sparse"))]
-        if path == LinearPath::Sparse {
+        if self.linear_path == LinearPath::Sparse {
             let _ = init;
             return Err(Error::NoSparseKernels {
                 reason: "forced-vi was built without its `sparse` feature",
@@ -162,9 +140,8 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
         init: &InitialState<N>,
         scheme: &'s Scheme,
         newton: NewtonOptions,
-        linear_path: LinearPath,
     ) -> Result<Option<SparseBackend<'s>>, Error> {
-        let node = match (linear_path, self.model.sparse_node()) {
+        let node = match (self.linear_path, self.model.sparse_node()) {
             (LinearPath::Dense, _) => return Ok(None),
             (LinearPath::Sparse, None) => {
                 return Err(Error::NoSparseKernels {
@@ -197,7 +174,7 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
             NodeRef::Borrowed(node)
         };
         let constant_mass = M::STRUCTURE.constant_mass;
-        let path = (linear_path, constant_mass);
+        let path = (self.linear_path, constant_mass);
         let model = self.model;
         let reads_time = M::CONSTRAINED && M::CONSTRAINTS_READ_TIME && cons > 0;
         let rate: Option<ConstraintRate<'_>> = reads_time.then(|| {

@@ -245,6 +245,24 @@ impl Saddle {
         self.lu.factor()
     }
 
+    /// Factors `[[E, Gᵀ], [G, 0]]` with `E` and `G` given on their patterns, for solves with
+    /// other right-hand sides ([`Self::solve`]): the end projection of a step, linearised
+    /// for its tangent.
+    pub(crate) fn factor_with(
+        &mut self,
+        node_pattern: &NodePattern,
+        e: &[f64],
+        g: &[f64],
+    ) -> Result<(), NewtonFailure> {
+        self.factor(node_pattern, Some(e), g)
+    }
+
+    /// Solves with the last factors, in place (`n + m` values: the velocity's rows, then
+    /// the constraints').
+    pub(crate) fn solve(&mut self, rhs: &mut [f64]) {
+        self.lu.solve_in_place(rhs);
+    }
+
     /// The end of a constrained step: `v` and `μ̂` with `L_v(t, q, v) + Gᵀ μ̂ = p̃` and
     /// `G v + ∂g/∂t = 0` (`rate = ∂g/∂t` at `(t, q)`), by Newton from the guess in
     /// [`Self::v`] and `μ̂ = 0`, to the round-off of the terms.

@@ -133,8 +133,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         self.backend.linearize()?;
         // A constrained step's own terms (see `super::tangent_constrained`).
         let terms = if M::CONSTRAINED && self.model.constraint_count() > 0 {
-            let need =
-                general::constraint_stack_bytes::<N>().max(general::parameter_stack_bytes::<N>());
+            // The dense terms take second-order dual numbers over all `N` coordinates; the
+            // sparse backend's come from its kernels, and the rest of either from
+            // hyper-dual numbers held on the heap.
+            let dense = self.path() == crate::LinearPath::Dense;
+            let curvature = if dense {
+                general::constraint_stack_bytes::<N>()
+            } else {
+                0
+            };
+            let need = curvature.max(general::parameter_stack_bytes::<N>());
             Some(with_stack(need, || self.constraint_terms(&theta))?)
         } else {
             None

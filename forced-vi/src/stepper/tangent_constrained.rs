@@ -17,16 +17,19 @@
 //!   `H = ∂(G(q) v₁ + ∂g/∂t)/∂q` at `q₁`, and `dp₁ = dp̃ − G₁ᵀ dμ̂ − K_μ dq₁ −
 //!   ∂(G₁ᵀ μ̂)/∂θ dθ`.
 //!
-//! Every term is exact (dual numbers over the constraints, the step's own factors): the
-//! result is the derivative of the discrete map, checked against central differences of
-//! whole runs in the tests. Directions off the constraints (`G(q₀) dq₀ ≠ 0`) are carried as
+//! Every term is exact (the step's own factors; on the dense backend, dual numbers over the
+//! constraints in all `N` coordinates; on the sparse one, its kernels' `G` and curvature on
+//! their patterns, the end's saddle point factored again at `(q₁, v₁)` by its sparse LU,
+//! and `H` and the parameters' terms from hyper-dual numbers along each coordinate, `N`
+//! evaluations of `g` per step): the result is the derivative of the discrete map, checked
+//! against central differences of whole runs in the tests, on both backends. Directions off the constraints (`G(q₀) dq₀ ≠ 0`) are carried as
 //! the map's linear extension; the map is only a flow on the constraints.
 
 use nalgebra::{DMatrix, DVector, SVector};
 
 use super::Stepper;
 use super::tangent::{Tangent, linearized_gradients, parameter_gradient};
-use crate::backend::{StepBackend, StepFailure};
+use crate::backend::{SparseConstraintTerms, StepBackend, StepFailure};
 use crate::error::NewtonFailure;
 use crate::model::ForcedLagrangian;
 use crate::model::general::{
@@ -36,18 +39,102 @@ use crate::model::general::{
 /// The constraint terms of one solved step, evaluated once for all its tangent's columns.
 pub(super) struct ConstraintTerms {
     m: usize,
-    /// `G(x_j)`, `j = 0 … s − 1` (`m × N` each).
-    g: Vec<DMatrix<f64>>,
-    /// `K_j`, `j = 0 … s − 2`.
-    k: Vec<DMatrix<f64>>,
-    /// The end: `C₁ + K_μ`, `K_μ`, `H` and the factors of `[[E₁, G₁ᵀ], [G₁, 0]]`.
-    c1k: DMatrix<f64>,
-    kmu: DMatrix<f64>,
-    rate: DMatrix<f64>,
-    kkt: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    /// The matrices, dense or on the sparse backend's patterns.
+    kind: Kind,
     /// Per parameter: `∂(G_jᵀ ŵ_j)/∂θ` (`j ≤ s − 2`), `∂g(x_j)/∂θ` (`j ≥ 1`, block `j − 1`),
     /// and at the end `∂L_v/∂θ + ∂(G₁ᵀ μ̂)/∂θ`, `∂(G₁ᵀ μ̂)/∂θ`, `∂(G₁ v₁ + ∂g/∂t)/∂θ`.
     params: Vec<ParameterTerms>,
+}
+
+/// The matrices of [`ConstraintTerms`].
+enum Kind {
+    /// The dense backend's, from the model's dense kernels.
+    Dense {
+        /// `G(x_j)`, `j = 0 … s − 1` (`m × N` each).
+        g: Vec<DMatrix<f64>>,
+        /// `K_j`, `j = 0 … s − 2`.
+        k: Vec<DMatrix<f64>>,
+        /// The end: `C₁ + K_μ`, `K_μ`, `H` and the factors of `[[E₁, G₁ᵀ], [G₁, 0]]`.
+        c1k: DMatrix<f64>,
+        kmu: DMatrix<f64>,
+        rate: DMatrix<f64>,
+        kkt: nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    },
+    /// The sparse backend's, on its patterns, with `H` by its entries `(r, a, value)`; the
+    /// backend holds the factors of the end projection.
+    Sparse {
+        terms: SparseConstraintTerms,
+        rate: Vec<(usize, usize, f64)>,
+    },
+}
+
+impl Kind {
+    /// `K_j dq` (`j ≤ s − 2`).
+    fn curvature(&self, j: usize, dq: &[f64], out: &mut [f64]) {
+        match self {
+            Kind::Dense { k, .. } => out.copy_from_slice((&k[j] * vector(dq)).as_slice()),
+            Kind::Sparse { terms, .. } => {
+                SparseConstraintTerms::times(&terms.node_entries, &terms.k[j], dq, out)
+            }
+        }
+    }
+
+    /// `G_j dq`.
+    fn constraints(&self, j: usize, dq: &[f64], out: &mut [f64]) {
+        match self {
+            Kind::Dense { g, .. } => out.copy_from_slice((&g[j] * vector(dq)).as_slice()),
+            Kind::Sparse { terms, .. } => {
+                SparseConstraintTerms::times(&terms.g_entries, &terms.g[j], dq, out)
+            }
+        }
+    }
+
+    /// `G_jᵀ y`.
+    fn constraints_transposed(&self, j: usize, y: &[f64], out: &mut [f64]) {
+        match self {
+            Kind::Dense { g, .. } => out.copy_from_slice((g[j].transpose() * vector(y)).as_slice()),
+            Kind::Sparse { terms, .. } => {
+                SparseConstraintTerms::times_transposed(&terms.g_entries, &terms.g[j], y, out)
+            }
+        }
+    }
+
+    /// At the end: `(C₁ + K_μ) dq₁`, `K_μ dq₁` and `H dq₁`.
+    fn end(&self, dq1: &[f64], (c1k_dq, kmu_dq, rate_dq): (&mut [f64], &mut [f64], &mut [f64])) {
+        match self {
+            Kind::Dense { c1k, kmu, rate, .. } => {
+                let d = vector(dq1);
+                c1k_dq.copy_from_slice((c1k * &d).as_slice());
+                kmu_dq.copy_from_slice((kmu * &d).as_slice());
+                rate_dq.copy_from_slice((rate * &d).as_slice());
+            }
+            Kind::Sparse { terms, rate } => {
+                let e = &terms.node_entries;
+                SparseConstraintTerms::times(e, &terms.c1k, dq1, c1k_dq);
+                SparseConstraintTerms::times(e, &terms.kmu, dq1, kmu_dq);
+                rate_dq.fill(0.0);
+                for &(r, a, x) in rate {
+                    rate_dq[r] += x * dq1[a];
+                }
+            }
+        }
+    }
+
+    /// Solves the end projection's `[[E₁, G₁ᵀ], [G₁, 0]] x = end` in place; false where it
+    /// cannot.
+    fn solve_end(&self, backend: &mut dyn StepBackend, end: &mut DVector<f64>) -> bool {
+        match self {
+            Kind::Dense { kkt, .. } => kkt.solve_mut(end),
+            Kind::Sparse { .. } => {
+                backend.solve_end_projection(end.as_mut_slice())
+                    && end.iter().all(|x| x.is_finite())
+            }
+        }
+    }
+}
+
+fn vector(x: &[f64]) -> DVector<f64> {
+    DVector::from_column_slice(x)
 }
 
 struct ParameterTerms {
@@ -87,8 +174,63 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     /// The constraint terms of the step just solved and committed (see the module docs),
-    /// at its control points, multipliers and projected end.
-    pub(super) fn constraint_terms(&self, theta: &[f64]) -> Result<ConstraintTerms, StepFailure> {
+    /// at its control points, multipliers and projected end: from the sparse backend's
+    /// kernels where it makes them, else from the model's dense ones.
+    pub(super) fn constraint_terms(
+        &mut self,
+        theta: &[f64],
+    ) -> Result<ConstraintTerms, StepFailure> {
+        let sparse = self.backend.sparse_constraint_terms()?;
+        let (model, sch) = (self.model, self.scheme);
+        let (s, m, h, _) = self.solved_step();
+        let t1 = self.state.t_state;
+        let q1 = self.backend.node_x(s - 1).to_vec();
+        let (kind, v1) = match sparse {
+            Some(terms) => {
+                // `H = ∂(G v₁ + ∂g/∂t)/∂q` by its entries: the second derivative of `g`
+                // along `(1, v₁)` in `(t, q)` and along each coordinate.
+                let v1 = terms.v1.clone();
+                let mut rate = Vec::new();
+                let along = Direction {
+                    t: if M::CONSTRAINTS_READ_TIME { 1.0 } else { 0.0 },
+                    q: Some(&v1),
+                    theta: None,
+                };
+                let mut finite = true;
+                along_coordinates(model, (t1, &q1, theta), along, |a, _, sec| {
+                    for (r, &x) in sec.iter().enumerate() {
+                        finite &= x.is_finite();
+                        if x != 0.0 {
+                            rate.push((r, a, x));
+                        }
+                    }
+                });
+                if !finite {
+                    return Err(non_finite());
+                }
+                (Kind::Sparse { terms, rate }, v1)
+            }
+            None => {
+                let (kind, v1) = self.dense_terms(theta)?;
+                (kind, v1.as_slice().to_vec())
+            }
+        };
+        let wb = sch.b()[s - 1] / h;
+        let mu: Vec<f64> = self
+            .backend
+            .end_multipliers()
+            .iter()
+            .map(|w| wb * w)
+            .collect();
+        let mut params = Vec::with_capacity(theta.len());
+        for p in 0..theta.len() {
+            params.push(self.parameter_terms(theta, p, (&mu, &v1))?);
+        }
+        Ok(ConstraintTerms { m, kind, params })
+    }
+
+    /// The dense terms of the step just solved, and its projected end velocity.
+    fn dense_terms(&self, theta: &[f64]) -> Result<(Kind, SVector<f64, N>), StepFailure> {
         let (model, backend, sch) = (self.model, &self.backend, self.scheme);
         let (s, m, h, t0) = self.solved_step();
         let x_at = |j: usize| SVector::<f64, N>::from_column_slice(backend.node_x(j));
@@ -151,20 +293,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         if !kkt.is_invertible() {
             return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
         }
-        let mut params = Vec::with_capacity(theta.len());
-        for p in 0..theta.len() {
-            params.push(self.parameter_terms(theta, p, (&mu, v1.as_slice()))?);
-        }
-        Ok(ConstraintTerms {
-            m,
+        let kind = Kind::Dense {
             g,
             k,
             c1k,
             kmu,
             rate,
             kkt,
-            params,
-        })
+        };
+        Ok((kind, v1))
     }
 
     /// The terms of parameter `p` (see [`ConstraintTerms::params`]), with the end impulse
@@ -284,23 +421,28 @@ pub(super) fn propagate_constrained(
     let lay = backend.layout();
     let (m, np) = (ct.m, tg.theta.len());
     let mut end = DVector::zeros(n + m);
+    let (mut f, mut r) = (vec![0.0; n], vec![0.0; m]);
+    let (mut c1k_dq, mut kmu_dq, mut rate_dq) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+    let mut g1t_dmu = vec![0.0; n];
     for c in 0..tg.columns(n) {
         let col = c * 2 * n;
         let p = c.checked_sub(2 * n);
         let pt = p.and_then(|p| ct.params.get(p));
-        let dq = DVector::from_column_slice(&tg.m[col..col + n]);
-        tg.dx[..n].copy_from_slice(dq.as_slice());
+        let dq = tg.m[col..col + n].to_vec();
+        tg.dx[..n].copy_from_slice(&dq);
         tg.dx[n..].fill(0.0);
         let param = p.map(|p| (&tg.pnode[..], p, np));
         linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
         // The constraint forces of the control points `j ≤ s − 2` moved by `dq` (and `dθ`).
-        for (j, (kj, bj)) in ct.k.iter().zip(&b).enumerate() {
-            let mut f = kj * &dq;
+        for (j, bj) in b.iter().enumerate().take(s - 1) {
+            ct.kind.curvature(j, &dq, &mut f);
             if let Some(pt) = pt {
-                f += &pt.force[j];
+                f.iter_mut()
+                    .zip(pt.force[j].iter())
+                    .for_each(|(x, y)| *x += y);
             }
             let w = bj / h;
-            for (g, fa) in tg.g[j * n..(j + 1) * n].iter_mut().zip(f.iter()) {
+            for (g, fa) in tg.g[j * n..(j + 1) * n].iter_mut().zip(&f) {
                 *g -= w * fa;
             }
         }
@@ -311,12 +453,14 @@ pub(super) fn propagate_constrained(
             }
         }
         for j in 1..s {
-            let mut r = &ct.g[j] * &dq;
+            ct.kind.constraints(j, &dq, &mut r);
             if let Some(pt) = pt {
-                r += &pt.rows[j - 1];
+                r.iter_mut()
+                    .zip(pt.rows[j - 1].iter())
+                    .for_each(|(x, y)| *x += y);
             }
-            for k in 0..m {
-                tg.rhs[lay.multiplier(j - 1, k)] = -r[k];
+            for (k, rk) in r.iter().enumerate() {
+                tg.rhs[lay.multiplier(j - 1, k)] = -rk;
             }
         }
         backend.solve_linearized(&mut tg.rhs);
@@ -327,25 +471,22 @@ pub(super) fn propagate_constrained(
         }
         linearized_gradients(backend, h, &tg.dx, param, &mut tg.g, &mut tg.node);
         // The projection at the end.
-        let dq1 = DVector::from_fn(n, |a, _| dq[a] + tg.dx[(s - 1) * n + a]);
-        let dpt = DVector::from_column_slice(&tg.g[(s - 1) * n..s * n]);
-        let mut top = &dpt - &ct.c1k * &dq1;
-        let mut bottom = -(&ct.rate * &dq1);
-        if let Some(pt) = pt {
-            top -= &pt.end_lv;
-            bottom -= &pt.end_rate;
-        }
-        end.rows_mut(0, n).copy_from(&top);
-        end.rows_mut(n, m).copy_from(&bottom);
-        let solved = ct.kkt.solve_mut(&mut end);
-        let dmu = end.rows(n, m);
-        let mut dp1 = dpt - ct.g[s - 1].transpose() * dmu - &ct.kmu * &dq1;
-        if let Some(pt) = pt {
-            dp1 -= &pt.end_force;
-        }
+        let dq1: Vec<f64> = (0..n).map(|a| dq[a] + tg.dx[(s - 1) * n + a]).collect();
+        let dpt = &tg.g[(s - 1) * n..s * n];
+        ct.kind.end(&dq1, (&mut c1k_dq, &mut kmu_dq, &mut rate_dq));
         for a in 0..n {
+            end[a] = dpt[a] - c1k_dq[a] - pt.map_or(0.0, |pt| pt.end_lv[a]);
+        }
+        for k in 0..m {
+            end[n + k] = -rate_dq[k] - pt.map_or(0.0, |pt| pt.end_rate[k]);
+        }
+        let solved = ct.kind.solve_end(backend, &mut end);
+        ct.kind
+            .constraints_transposed(s - 1, end.rows(n, m).as_slice(), &mut g1t_dmu);
+        for a in 0..n {
+            let dp1 = dpt[a] - g1t_dmu[a] - kmu_dq[a] - pt.map_or(0.0, |pt| pt.end_force[a]);
             tg.m[col + a] += tg.dx[(s - 1) * n + a];
-            tg.m[col + n + a] = if solved { dp1[a] } else { f64::NAN };
+            tg.m[col + n + a] = if solved { dp1 } else { f64::NAN };
         }
     }
 }
