@@ -762,9 +762,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     fn deep_stack(&self) -> bool {
         true
     }
-    fn constrained_tangents(&self) -> bool {
-        true
-    }
     // The stepper makes a dense step's terms from the model (`tangent_constrained`).
     fn sparse_constraint_terms(
         &mut self,

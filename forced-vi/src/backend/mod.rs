@@ -271,9 +271,6 @@ pub(crate) trait StepBackend {
     /// Whether the node kernels of this backend need a deep stack (see
     /// [`crate::stepper`]'s stack guard).
     fn deep_stack(&self) -> bool;
-    /// Whether [`Self::linearize`] and [`Self::solve_linearized`] carry a constrained
-    /// step's multipliers and constraint rows (the tangent of a constrained model).
-    fn constrained_tangents(&self) -> bool;
     /// The constraint terms of the tangent of the constrained step just solved and
     /// linearised, on the backend's sparse patterns, with the end projection's matrix
     /// factored for [`Self::solve_end_projection`] (see `crate::stepper`'s
@@ -607,10 +604,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn deep_stack(&self) -> bool {
         forward!(self, b => b.deep_stack())
-    }
-    #[inline(always)]
-    fn constrained_tangents(&self) -> bool {
-        forward!(self, b => b.constrained_tangents())
     }
     fn sparse_constraint_terms(&mut self) -> Result<Option<SparseConstraintTerms>, StepFailure> {
         forward!(self, b => b.sparse_constraint_terms())

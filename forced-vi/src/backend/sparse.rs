@@ -508,9 +508,6 @@ impl StepBackend for SparseBackend<'_> {
     fn deep_stack(&self) -> bool {
         false
     }
-    fn constrained_tangents(&self) -> bool {
-        true
-    }
 
     fn sparse_constraint_terms(
         &mut self,

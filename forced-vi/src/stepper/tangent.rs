@@ -74,15 +74,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     fn track_tangent_here(&mut self) -> Result<(), Error> {
-        if M::CONSTRAINED
-            && self.model.constraint_count() > 0
-            && !self.backend.constrained_tangents()
-        {
-            return Err(Error::UnsupportedConstraints {
-                message: "sensitivities of a constrained model on the sparse backend are not \
-                          supported yet (the dense backend carries them)",
-            });
-        }
         let s = self.scheme.stages();
         let dim = self.backend.z().len();
         let theta = super::checks::parameter_values(self.model)?;
