@@ -341,8 +341,8 @@
 //! columns from [`ForcedLagrangian::constraints_with`]. Only directions that keep the
 //! initial data on the constraints are the flow's; the tangent maps others as the discrete
 //! map's extension, which depends on the step. A loss gradient
-//! ([`output::adjoint`](crate::output::adjoint)) of a constrained model comes from that
-//! tangent, at its cost, on either backend. Non-Lobatto schemes are
+//! ([`output::adjoint`](crate::output::adjoint)) of a constrained model is a backward pass
+//! through the same terms, on either backend. Non-Lobatto schemes are
 //! [`Error::UnsupportedConstraints`]. A large model runs on the sparse backend when its
 //! hand-written [`SparseNode`](crate::model::SparseNode) kernels evaluate the constraints
 //! too ([`SparseNode::sparse_constraint_count`](crate::model::SparseNode::sparse_constraint_count),

@@ -720,7 +720,22 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
             self.rhs = DVector::zeros(b.len());
         }
         self.rhs.as_mut_slice().copy_from_slice(b);
+        // A constrained step's Jacobian is factored in the iteration's units (see
+        // `solve_linearized`, `J⁻¹ = C J_it⁻¹ R`): here `J⁻ᵀ = R J_it⁻ᵀ C`.
+        let prob = &self.prob;
+        let m = if M::CONSTRAINED { prob.cons } else { 0 };
+        let nz = (prob.scheme.stages() - 1) * N;
+        if m > 0 {
+            for (i, x) in self.rhs.iter_mut().enumerate().skip(nz) {
+                *x *= prob.col_scale[(i - nz) % m];
+            }
+        }
         lu.solve_in_place(&mut self.rhs);
+        if m > 0 {
+            for (i, x) in self.rhs.iter_mut().enumerate().skip(nz) {
+                *x *= prob.row_scale[(i - nz) % m];
+            }
+        }
         b.copy_from_slice(self.rhs.as_slice());
     }
 
@@ -770,5 +785,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for DenseBackend<'_, M,
     }
     fn solve_end_projection(&mut self, _rhs: &mut [f64]) -> bool {
         false
+    }
+    // The stepper solves a dense step's end velocity again from its momentum.
+    fn end_velocity(&self) -> Option<&[f64]> {
+        None
+    }
+    fn restore_end(&mut self, mu: &[f64], _v1: &[f64]) {
+        if self.mu.len() == mu.len() {
+            self.mu.copy_from_slice(mu);
+        }
     }
 }

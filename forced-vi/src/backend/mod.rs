@@ -280,6 +280,12 @@ pub(crate) trait StepBackend {
     /// Solves `[[E₁, G₁ᵀ], [G₁, 0]] x = rhs` in place with the factors of the last
     /// [`Self::sparse_constraint_terms`]; false without them.
     fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool;
+    /// A constrained step's projected end velocity where the backend keeps it (the sparse
+    /// one), for the adjoint's tape.
+    fn end_velocity(&self) -> Option<&[f64]>;
+    /// Puts back a constrained step's end multipliers ([`Self::end_multipliers`]) and
+    /// projected end velocity, after [`Self::restore`].
+    fn restore_end(&mut self, mu: &[f64], v1: &[f64]);
 }
 
 /// A constrained step's terms for its tangent on sparse patterns (see
@@ -610,5 +616,11 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     }
     fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool {
         forward!(self, b => b.solve_end_projection(rhs))
+    }
+    fn end_velocity(&self) -> Option<&[f64]> {
+        forward!(self, b => b.end_velocity())
+    }
+    fn restore_end(&mut self, mu: &[f64], v1: &[f64]) {
+        forward!(self, b => b.restore_end(mu, v1))
     }
 }

@@ -520,6 +520,19 @@ impl StepBackend for SparseBackend<'_> {
         terms.map(Some)
     }
 
+    fn end_velocity(&self) -> Option<&[f64]> {
+        self.saddle.as_ref().map(|s| &s.v[..])
+    }
+
+    fn restore_end(&mut self, mu: &[f64], v1: &[f64]) {
+        if self.mu.len() == mu.len() {
+            self.mu.copy_from_slice(mu);
+        }
+        if let Some(saddle) = self.saddle.as_mut().filter(|s| s.v.len() == v1.len()) {
+            saddle.v.copy_from_slice(v1);
+        }
+    }
+
     fn solve_end_projection(&mut self, rhs: &mut [f64]) -> bool {
         match self.end_tangent.as_mut() {
             Some(saddle) if self.end_factored => {

@@ -149,9 +149,10 @@ pub struct Tangents;
 /// one transposed solve per step, so that its cost does not grow with the number of
 /// parameters, beyond one hyper-dual evaluation of `L` per node and parameter. It equals
 /// `wrt_initialᵀ g` of [`Tangents`] to round-off (tested), at a fraction of its cost for
-/// large models. With tolerances the step sequence is held fixed. A constrained model gets
-/// its gradient from the forward tangent instead ([`Tangents`], dense backend), at its cost
-/// and with no tape ([`AdjointGradient::tape_bytes`] 0).
+/// large models. With tolerances the step sequence is held fixed. A constrained step also
+/// keeps its end on the tape (its end momentum, multipliers and velocity), and the backward
+/// pass takes the adjoint through its end projection and its constraint rows too, on
+/// either backend.
 ///
 /// ```
 /// use forced_vi::prelude::*;
@@ -344,9 +345,6 @@ where
         t_final: f64,
     ) -> Result<AdjointGradient<N>, RunFailure<N>> {
         refuse_large(integ)?;
-        if M::CONSTRAINED && integ.model.constraint_count() > 0 {
-            return constrained_adjoint(integ, slot, (init, t_final), self.0);
-        }
         open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.keep_tape().map_err(|e| stepper.failure(e))?;
@@ -371,43 +369,6 @@ where
             })
         })
     }
-}
-
-/// The gradient of a loss for a constrained model: from the forward tangent, which carries
-/// the multipliers and the end projection ([`Tangents`]), as `wrt_initialᵀ g` and
-/// `wrt_parametersᵀ g`; no tape. Its cost is that of the tangent, `2N + P` solves per step.
-fn constrained_adjoint<'s, M: ForcedLagrangian<N>, const N: usize, F>(
-    integ: &'s Integrator<'_, M, N>,
-    slot: &mut Slot<'s, M, N>,
-    (init, t_final): (InitialState<N>, f64),
-    dloss: F,
-) -> Result<AdjointGradient<N>, RunFailure<N>>
-where
-    F: FnOnce(&FinalState<N>) -> (SVector<f64, N>, SVector<f64, N>),
-{
-    open(integ, slot, init, t_final, |stepper| {
-        stepper.set_lean(true);
-        stepper.track_tangent().map_err(|e| stepper.failure(e))?;
-        let end = to_the_end(stepper)?;
-        let (gq, gv) = dloss(&end);
-        if let Some(index) = gq.iter().chain(gv.iter()).position(|x| !x.is_finite()) {
-            return Err(stepper.failure(Error::NonFiniteLossGradient { index }));
-        }
-        let (wrt_q0v0, wrt_theta) = stepper
-            .tangent_in_velocities()
-            .map_err(|e| stepper.failure(e))?;
-        let g = nalgebra::DVector::from_iterator(2 * N, gq.iter().chain(gv.iter()).copied());
-        Ok(AdjointGradient {
-            t: end.t,
-            q: end.q,
-            v: end.v,
-            p: end.p,
-            wrt_initial: wrt_q0v0.tr_mul(&g),
-            wrt_parameters: wrt_theta.tr_mul(&g),
-            tape_bytes: 0,
-            stats: end.stats,
-        })
-    })
 }
 
 /// The parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a stack

@@ -18,6 +18,16 @@
 //! parameter adds one hyper-dual evaluation of `L` per node
 //! ([`general::parameter_contraction`]). The ends go through `p_0 = L_v(q_0, v_0; θ)` and
 //! `E v_T = …` as in the forward tangent.
+//!
+//! A constrained step (see `super::tangent_constrained`) keeps its end too: `t₁`, `p₁`,
+//! the velocity guess, the end multipliers and the projected velocity. Backwards, `(a_q,
+//! a_p)` first goes through the transposed end projection, whose saddle-point matrix is
+//! symmetric: `y = [[E₁, G₁ᵀ], [G₁, 0]]⁻¹ (0, −G₁ a_p)`, then `a_p ← a_p + y_top` (the
+//! adjoint of `p̃`) and `a_q ← a_q − K_μ a_p − (C₁ + K_μ)ᵀ y_top − Hᵀ y_bot`. The transposed
+//! step solve then has zeros in its constraint rows, and its solution `(w, ω)` adds
+//! `Σ_{j≤s−2} (b_j/h) K_j w_j − Σ_{j≥1} G_jᵀ ω_{j−1}` to `a_q`; each parameter gains the
+//! same products with its constraint terms. It equals the forward tangent's
+//! `wrt_initialᵀ g` to round-off on both backends (tested).
 
 use nalgebra::DVector;
 
@@ -57,7 +67,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// step. Refuses a model whose parameter lists disagree before any step is taken.
     pub(crate) fn keep_tape(&mut self) -> Result<(), Error> {
         super::checks::parameter_values(self.model)?;
-        let width = 2 + 2 * N + self.backend.z().len();
+        // A constrained step also keeps its end (see `constrained_end`).
+        let width = 2 + 2 * N + self.backend.z().len() + self.end_width();
         self.tape = Some(Box::new(Tape {
             data: Vec::new(),
             width,
@@ -69,6 +80,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
 
     /// Keeps the step just solved (the backend still holds it).
     pub(super) fn tape_step(&mut self) -> Result<(), StepFailure> {
+        let end_width = self.end_width();
         let Some(tape) = self.tape.as_mut() else {
             return Ok(());
         };
@@ -82,7 +94,28 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         tape.data.extend_from_slice(q0);
         tape.data.extend_from_slice(p0);
         tape.data.extend_from_slice(self.backend.z());
+        if end_width > 0 {
+            // The end of the step: `t₁`, `p₁`, the velocity guess, the end multipliers and
+            // the projected velocity where the backend keeps it.
+            let st = &self.state;
+            tape.data.push(st.t_state);
+            tape.data.extend_from_slice(&st.p.sum);
+            tape.data.extend_from_slice(&st.v);
+            tape.data.extend_from_slice(self.backend.end_multipliers());
+            let v1 = self.backend.end_velocity().unwrap_or(&st.v);
+            tape.data.extend_from_slice(v1);
+        }
         Ok(())
+    }
+
+    /// The values a constrained step keeps of its end on the tape (0 without constraints).
+    fn end_width(&self) -> usize {
+        let m = self.model.constraint_count();
+        if M::CONSTRAINED && m > 0 {
+            1 + 3 * N + m
+        } else {
+            0
+        }
     }
 
     /// The bytes of the tape kept so far.
@@ -156,12 +189,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let size = aq.iter().chain(&ap).fold(0.0f64, |m, x| m.max(x.abs()));
             let (h, t0) = (rec[0], rec[1]);
             let (q0, rest) = rec[2..].split_at(N);
-            let (p0, z) = rest.split_at(N);
+            let (p0, rest) = rest.split_at(N);
+            let (z, end) = rest.split_at(dim);
             self.backend.restore(h, t0, (q0, p0), z);
             self.backend
                 .linearize_transposed()
                 .map_err(|f| step_fail(f, k, t0))?;
+            // A constrained step: its terms, and the adjoint taken back through its end
+            // projection first (see `super::tangent_constrained`).
+            let constrained = match self.constrained_end(end, h, k, &theta) {
+                Some(ct) => {
+                    let ct = ct.map_err(|f| step_fail(f, k, t0))?;
+                    let (mut adq1, mut adpt) = (vec![0.0; N], vec![0.0; N]);
+                    let y = ct
+                        .end_adjoint(&mut self.backend, (&aq, &ap), (&mut adq1, &mut adpt))
+                        .ok_or_else(|| super::checks::non_finite(size, k, t0, "adjoint"))?;
+                    let ap1 = std::mem::replace(&mut ap, adpt);
+                    aq = adq1;
+                    Some((ct, y, ap1))
+                }
+                None => None,
+            };
             // c = S_Zᵀ Kᵀ (0, …, 0, a_p) + a_q at the last control point.
+            c.fill(0.0);
             mu.fill(0.0);
             mu[(s - 1) * N..].copy_from_slice(&ap);
             transposed_gradients(
@@ -196,6 +246,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             for (a, x) in aq.iter_mut().enumerate() {
                 *x += (0..s).map(|m| u[m * N + a]).sum::<f64>();
             }
+            if let Some((ct, y, ap1)) = &constrained {
+                ct.step_adjoint(&self.backend, (&c, y, ap1, h), &mut aq, &mut grad_theta);
+            }
             ap.copy_from_slice(&mu[..N]);
             for i in 0..r {
                 let ti = t0 + sch.c()[i] * h;
@@ -227,6 +280,44 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             return Err(super::checks::non_finite(size, 0, 0.0, "adjoint"));
         }
         Ok((grad, DVector::from_vec(grad_theta)))
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
+    /// A constrained step's terms for the backward pass, from the end it kept on the tape
+    /// (see [`Self::tape_step`]), with the backend restored to the step and linearised;
+    /// `None` without constraints.
+    fn constrained_end(
+        &mut self,
+        end: &[f64],
+        h: f64,
+        k: usize,
+        theta: &[f64],
+    ) -> Option<Result<super::tangent_constrained::ConstraintTerms, StepFailure>> {
+        if self.end_width() == 0 || end.len() < self.end_width() {
+            return None;
+        }
+        let m = self.model.constraint_count();
+        let t1 = end[0];
+        let (p1, rest) = end[1..].split_at(N);
+        let (v_guess, rest) = rest.split_at(N);
+        let (mu, v1) = rest.split_at(m);
+        self.backend.restore_end(mu, &v1[..N]);
+        let step_end = super::tangent_constrained::StepEnd {
+            h,
+            t1,
+            p1: p1.to_vec(),
+            v_guess: v_guess.to_vec(),
+            k,
+        };
+        let dense = self.path() == crate::LinearPath::Dense;
+        let curvature = if dense {
+            general::constraint_stack_bytes::<N>()
+        } else {
+            0
+        };
+        let need = curvature.max(general::parameter_stack_bytes::<N>());
+        Some(with_stack(need, || self.constraint_terms(theta, &step_end)))
     }
 }
 

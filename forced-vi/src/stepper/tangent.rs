@@ -134,7 +134,8 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 0
             };
             let need = curvature.max(general::parameter_stack_bytes::<N>());
-            Some(with_stack(need, || self.constraint_terms(&theta))?)
+            let end = self.step_end();
+            Some(with_stack(need, || self.constraint_terms(&theta, &end))?)
         } else {
             None
         };

@@ -120,6 +120,28 @@ impl Kind {
         }
     }
 
+    /// The transposed end products: `out = K_μ a_p + (C₁ + K_μ)ᵀ y_top + Hᵀ y_bot`.
+    fn end_transposed(&self, ap: &[f64], (y_top, y_bot): (&[f64], &[f64]), out: &mut [f64]) {
+        match self {
+            Kind::Dense { c1k, kmu, rate, .. } => {
+                let x = kmu * vector(ap)
+                    + c1k.transpose() * vector(y_top)
+                    + rate.transpose() * vector(y_bot);
+                out.copy_from_slice(x.as_slice());
+            }
+            Kind::Sparse { terms, rate } => {
+                let e = &terms.node_entries;
+                let mut t = vec![0.0; out.len()];
+                SparseConstraintTerms::times(e, &terms.kmu, ap, out);
+                SparseConstraintTerms::times_transposed(e, &terms.c1k, y_top, &mut t);
+                out.iter_mut().zip(&t).for_each(|(o, x)| *o += x);
+                for &(r, a, x) in rate {
+                    out[a] += x * y_bot[r];
+                }
+            }
+        }
+    }
+
     /// Solves the end projection's `[[E₁, G₁ᵀ], [G₁, 0]] x = end` in place; false where it
     /// cannot.
     fn solve_end(&self, backend: &mut dyn StepBackend, end: &mut DVector<f64>) -> bool {
@@ -128,6 +150,98 @@ impl Kind {
             Kind::Sparse { .. } => {
                 backend.solve_end_projection(end.as_mut_slice())
                     && end.iter().all(|x| x.is_finite())
+            }
+        }
+    }
+}
+
+impl ConstraintTerms {
+    /// The adjoint `(a_q, a_p)` of the end `(q₁, p₁)` taken back through the end projection
+    /// (its transpose; the saddle-point matrix is symmetric): into `adq1` and `adpt`, the
+    /// adjoints of `q₁` before the projection and of `p̃`. Returns `y`, the projection's
+    /// transposed solution (`N + m` values), or `None` where it could not be solved.
+    pub(super) fn end_adjoint(
+        &self,
+        backend: &mut dyn StepBackend,
+        (aq, ap): (&[f64], &[f64]),
+        (adq1, adpt): (&mut [f64], &mut [f64]),
+    ) -> Option<DVector<f64>> {
+        let (n, m, s) = (aq.len(), self.m, backend.scheme().stages());
+        let mut y = DVector::zeros(n + m);
+        let mut g1ap = vec![0.0; m];
+        self.kind.constraints(s - 1, ap, &mut g1ap);
+        for (k, x) in g1ap.iter().enumerate() {
+            y[n + k] = -x;
+        }
+        if !self.kind.solve_end(backend, &mut y) {
+            return None;
+        }
+        let (top, bottom) = (y.rows(0, n), y.rows(n, m));
+        self.kind
+            .end_transposed(ap, (top.as_slice(), bottom.as_slice()), adq1);
+        for a in 0..n {
+            adq1[a] = aq[a] - adq1[a];
+            adpt[a] = ap[a] + y[a];
+        }
+        Some(y)
+    }
+
+    /// The adjoint of `dq` from the constraint terms of the step's equations, added to
+    /// `aq`: `Σ_{j ≤ s−2} (b_j/h) K_j w_j − Σ_{j ≥ 1} G_jᵀ ω_{j−1}`, with `w` the transposed
+    /// solution `c` in the gradient rows of control point `j + 1` and `ω` in the constraint
+    /// rows; and each parameter's share into `grad`, with `y` from [`Self::end_adjoint`]
+    /// and `ap` the adjoint of `p₁`.
+    pub(super) fn step_adjoint(
+        &self,
+        backend: &dyn StepBackend,
+        (c, y, ap, h): (&[f64], &DVector<f64>, &[f64], f64),
+        aq: &mut [f64],
+        grad: &mut [f64],
+    ) {
+        let (n, m) = (aq.len(), self.m);
+        let sch = backend.scheme();
+        let (s, lay) = (sch.stages(), backend.layout());
+        let (mut w, mut om, mut t) = (vec![0.0; n], vec![0.0; m], vec![0.0; n]);
+        let at_w = |j: usize, w: &mut [f64]| {
+            for (a, x) in w.iter_mut().enumerate() {
+                *x = c[lay.at(j + 1, a)];
+            }
+        };
+        let at_om = |j: usize, om: &mut [f64]| {
+            for (k, x) in om.iter_mut().enumerate() {
+                *x = c[lay.multiplier(j, k)];
+            }
+        };
+        for j in 0..s - 1 {
+            at_w(j, &mut w);
+            self.kind.curvature(j, &w, &mut t);
+            let f = sch.b()[j] / h;
+            aq.iter_mut().zip(&t).for_each(|(x, v)| *x += f * v);
+            for (p, g) in grad.iter_mut().enumerate() {
+                if let Some(pt) = self.params.get(p) {
+                    *g += f * pt.force[j].iter().zip(&w).map(|(a, b)| a * b).sum::<f64>();
+                }
+            }
+        }
+        for j in 1..s {
+            at_om(j - 1, &mut om);
+            self.kind.constraints_transposed(j, &om, &mut t);
+            aq.iter_mut().zip(&t).for_each(|(x, v)| *x -= v);
+            for (p, g) in grad.iter_mut().enumerate() {
+                if let Some(pt) = self.params.get(p) {
+                    *g -= pt.rows[j - 1]
+                        .iter()
+                        .zip(&om)
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>();
+                }
+            }
+        }
+        let (top, bottom) = (y.rows(0, n), y.rows(n, m));
+        for (p, g) in grad.iter_mut().enumerate() {
+            if let Some(pt) = self.params.get(p) {
+                *g -= pt.end_lv.dot(&top) + pt.end_rate.dot(&bottom);
+                *g -= pt.end_force.iter().zip(ap).map(|(a, b)| a * b).sum::<f64>();
             }
         }
     }
@@ -157,12 +271,32 @@ fn checked(x: &DMatrix<f64>) -> Result<(), StepFailure> {
     }
 }
 
+/// The end of the constrained step whose terms are made: its size, end time, end momentum,
+/// a guess of its projected end velocity (the step polynomial's slope) and its number.
+pub(super) struct StepEnd {
+    pub(super) h: f64,
+    pub(super) t1: f64,
+    pub(super) p1: Vec<f64>,
+    pub(super) v_guess: Vec<f64>,
+    pub(super) k: usize,
+}
+
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
-    /// The step just solved: its stages, constraints, size and start time.
-    fn solved_step(&self) -> (usize, usize, f64, f64) {
-        let h = self.state.h_prev;
+    /// The end of the step just solved and committed.
+    pub(super) fn step_end(&self) -> StepEnd {
+        StepEnd {
+            h: self.state.h_prev,
+            t1: self.state.t_state,
+            p1: self.state.p.sum.clone(),
+            v_guess: self.state.v.clone(),
+            k: self.k,
+        }
+    }
+
+    /// The step ending at `end`: its stages, constraints, size and start time.
+    fn solved_step(&self, end: &StepEnd) -> (usize, usize, f64, f64) {
         let m = self.model.constraint_count();
-        (self.scheme.stages(), m, h, self.state.t_state - h)
+        (self.scheme.stages(), m, end.h, end.t1 - end.h)
     }
 
     /// The multipliers `ŵ_j` of control point `j ≤ s − 2` of the step just solved.
@@ -173,17 +307,18 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             .collect()
     }
 
-    /// The constraint terms of the step just solved and committed (see the module docs),
+    /// The constraint terms of the step ending at `end`, solved and linearised (see the module docs),
     /// at its control points, multipliers and projected end: from the sparse backend's
     /// kernels where it makes them, else from the model's dense ones.
     pub(super) fn constraint_terms(
         &mut self,
         theta: &[f64],
+        end: &StepEnd,
     ) -> Result<ConstraintTerms, StepFailure> {
         let sparse = self.backend.sparse_constraint_terms()?;
         let (model, sch) = (self.model, self.scheme);
-        let (s, m, h, _) = self.solved_step();
-        let t1 = self.state.t_state;
+        let (s, m, h, _) = self.solved_step(end);
+        let t1 = end.t1;
         let q1 = self.backend.node_x(s - 1).to_vec();
         let (kind, v1) = match sparse {
             Some(terms) => {
@@ -211,7 +346,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 (Kind::Sparse { terms, rate }, v1)
             }
             None => {
-                let (kind, v1) = self.dense_terms(theta)?;
+                let (kind, v1) = self.dense_terms(theta, end)?;
                 (kind, v1.as_slice().to_vec())
             }
         };
@@ -224,15 +359,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             .collect();
         let mut params = Vec::with_capacity(theta.len());
         for p in 0..theta.len() {
-            params.push(self.parameter_terms(theta, p, (&mu, &v1))?);
+            params.push(self.parameter_terms(theta, p, (&mu, &v1), end)?);
         }
         Ok(ConstraintTerms { m, kind, params })
     }
 
     /// The dense terms of the step just solved, and its projected end velocity.
-    fn dense_terms(&self, theta: &[f64]) -> Result<(Kind, SVector<f64, N>), StepFailure> {
+    fn dense_terms(
+        &self,
+        theta: &[f64],
+        end: &StepEnd,
+    ) -> Result<(Kind, SVector<f64, N>), StepFailure> {
         let (model, backend, sch) = (self.model, &self.backend, self.scheme);
-        let (s, m, h, t0) = self.solved_step();
+        let (s, m, h, t0) = self.solved_step(end);
         let x_at = |j: usize| SVector::<f64, N>::from_column_slice(backend.node_x(j));
         let t_at = |j: usize| t0 + sch.c()[j] * h;
         let w_at = |j: usize| self.multipliers(j);
@@ -252,12 +391,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             k.push(kj);
         }
         // The end: the projected velocity, and the impulse `μ̂ = (b_{s−1}/h) ŵ_{s−1}`.
-        let (t1, q1) = (self.state.t_state, x_at(s - 1));
+        let (t1, q1) = (end.t1, x_at(s - 1));
         // The projected end velocity, `L_v(q₁, v₁) = p₁` (the state's is the step
         // polynomial's slope, a guess).
-        let p1 = SVector::<f64, N>::from_column_slice(&self.state.p.sum);
-        let guess = SVector::<f64, N>::from_column_slice(&self.state.v);
-        let v1 = crate::initial::solve_velocity(model, &q1, &p1, guess, self.k, t1)
+        let p1 = SVector::<f64, N>::from_column_slice(&end.p1);
+        let guess = SVector::<f64, N>::from_column_slice(&end.v_guess);
+        let v1 = crate::initial::solve_velocity(model, &q1, &p1, guess, end.k, t1)
             .map_err(|_| non_finite())?;
         let wb = sch.b()[s - 1] / h;
         let mu: Vec<f64> = backend.end_multipliers().iter().map(|w| wb * w).collect();
@@ -311,9 +450,10 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         theta: &[f64],
         p: usize,
         (mu, v1): (&[f64], &[f64]),
+        end: &StepEnd,
     ) -> Result<ParameterTerms, StepFailure> {
         let (model, backend, sch) = (self.model, &self.backend, self.scheme);
-        let (s, m, h, t0) = self.solved_step();
+        let (s, m, h, t0) = self.solved_step(end);
         let in_theta = Direction {
             t: 0.0,
             q: None,
@@ -348,7 +488,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 rows.push(r);
             }
         }
-        let (t1, q1) = (self.state.t_state, backend.node_x(s - 1));
+        let (t1, q1) = (end.t1, backend.node_x(s - 1));
         let along = Direction {
             t: if M::CONSTRAINTS_READ_TIME { 1.0 } else { 0.0 },
             q: Some(v1),
