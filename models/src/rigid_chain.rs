@@ -77,6 +77,9 @@ impl<const N: usize> ForcedLagrangian<N> for RigidChain<N> {
         linear: false,
         uses_time: false,
     };
+    // Fixed links: no constraint reads `t` (so the sparse sensitivities take `∂(G v)/∂q`
+    // from the kernels' second derivatives, not from `N` dual evaluations of `g`).
+    const CONSTRAINTS_READ_TIME: bool = false;
 
     fn lagrangian<D: Scalar>(&self, q: &[D; N], v: &[D; N]) -> D {
         let zero = D::from(0.0);

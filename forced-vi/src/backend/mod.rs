@@ -306,6 +306,9 @@ pub(crate) struct SparseConstraintTerms {
     pub(crate) kmu: Vec<f64>,
     /// The projected end velocity `v₁`.
     pub(crate) v1: Vec<f64>,
+    /// `H = ∂(G v₁)/∂q` at the end by its entries `(k, a, value)` (equal `(k, a)` add up),
+    /// from the kernels' second derivatives, where the constraints do not read `t`.
+    pub(crate) rate: Option<Vec<(usize, usize, f64)>>,
 }
 
 impl SparseConstraintTerms {

@@ -600,6 +600,22 @@ impl SparseBackend<'_> {
             return Err(failed(NewtonFailure::NonFinite));
         }
         let c1k: Vec<f64> = blocks.c.iter().zip(&kmu).map(|(c, k)| c + k).collect();
+        // `H = ∂(G v₁)/∂q` from the kernels' second derivatives, where `g` does not read `t`
+        // (else the stepper takes it with dual numbers, `∂²g/∂t∂q` included).
+        let rate = if self.rate.is_none() {
+            let (mut gval, mut entries) = (vec![0.0; m], Vec::new());
+            let mut sink = crate::model::ConstraintSink::rate(&mut gval, v1, &mut entries);
+            node.eval_constraints(t1, q1, &mut sink);
+            if sink.outside() {
+                return Err(failed(NewtonFailure::NonFinite));
+            }
+            if !entries.iter().all(|e| e.2.is_finite()) {
+                return Err(failed(NewtonFailure::NonFinite));
+            }
+            Some(entries)
+        } else {
+            None
+        };
         let g_pattern = &cons.pattern;
         if self.end_tangent.is_none() {
             let saddle = Saddle::new(&prob.pattern, g_pattern)
@@ -620,6 +636,7 @@ impl SparseBackend<'_> {
             c1k,
             kmu,
             v1: v1.to_vec(),
+            rate,
         })
     }
 }

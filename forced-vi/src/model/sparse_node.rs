@@ -293,6 +293,11 @@ enum ConstraintTarget<'a> {
         lambda: &'a [f64],
         curvature: &'a mut [f64],
     },
+    /// `H = ∂(G v)/∂q` by its entries `(k, a, Σ_c ∂²g_k/∂q_a∂q_c v_c)`, unsummed.
+    Rate {
+        v: &'a [f64],
+        entries: &'a mut Vec<(usize, usize, f64)>,
+    },
     /// Records which entries of `G` and of the curvature the kernel adds.
     Record {
         g_pairs: &'a mut Vec<(usize, usize)>,
@@ -343,6 +348,20 @@ impl<'a> ConstraintSink<'a> {
         sink
     }
 
+    /// A sink for `g` and for `H = ∂(G v)/∂q` at the velocity `v`, by its entries into
+    /// `entries` (cleared here; entries of equal `(k, a)` add up), from the constraints'
+    /// second derivatives.
+    pub(crate) fn rate(
+        g: &'a mut [f64],
+        v: &'a [f64],
+        entries: &'a mut Vec<(usize, usize, f64)>,
+    ) -> ConstraintSink<'a> {
+        entries.clear();
+        let mut sink = ConstraintSink::values(g);
+        sink.target = ConstraintTarget::Rate { v, entries };
+        sink
+    }
+
     /// A sink that records the entries of `G` and of the curvature that the kernel adds.
     pub fn record(
         g: &'a mut [f64],
@@ -377,7 +396,7 @@ impl<'a> ConstraintSink<'a> {
     #[inline]
     pub fn add_gradient(&mut self, k: usize, a: usize, x: f64) {
         match &mut self.target {
-            ConstraintTarget::Values => {}
+            ConstraintTarget::Values | ConstraintTarget::Rate { .. } => {}
             ConstraintTarget::Record { g_pairs, .. } => g_pairs.push((k, a)),
             ConstraintTarget::Jacobian {
                 g_pattern,
@@ -395,6 +414,10 @@ impl<'a> ConstraintSink<'a> {
     pub fn add_curvature(&mut self, k: usize, a: usize, c: usize, x: f64) {
         match &mut self.target {
             ConstraintTarget::Values => {}
+            ConstraintTarget::Rate { v, entries } => match v.get(c) {
+                Some(vc) => entries.push((k, a, x * vc)),
+                None => self.outside = true,
+            },
             ConstraintTarget::Record {
                 curvature_pairs, ..
             } => curvature_pairs.push((a, c)),

@@ -321,29 +321,34 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         let t1 = end.t1;
         let q1 = self.backend.node_x(s - 1).to_vec();
         let (kind, v1) = match sparse {
-            Some(terms) => {
-                // `H = ∂(G v₁ + ∂g/∂t)/∂q` by its entries: the second derivative of `g`
-                // along `(1, v₁)` in `(t, q)` and along each coordinate.
+            Some(mut terms) => {
+                // `H = ∂(G v₁ + ∂g/∂t)/∂q` by its entries: the backend's, from its kernels,
+                // or the second derivative of `g` along `(1, v₁)` in `(t, q)` and along each
+                // coordinate (`N` evaluations of `g`).
                 let v1 = terms.v1.clone();
-                let mut rate = Vec::new();
-                let along = Direction {
-                    t: if M::CONSTRAINTS_READ_TIME { 1.0 } else { 0.0 },
-                    q: Some(&v1),
-                    theta: None,
-                };
-                let mut finite = true;
-                along_coordinates(model, (t1, &q1, theta), along, |a, _, sec| {
-                    for (r, &x) in sec.iter().enumerate() {
-                        finite &= x.is_finite();
-                        if x != 0.0 {
-                            rate.push((r, a, x));
+                if let Some(rate) = terms.rate.take() {
+                    (Kind::Sparse { terms, rate }, v1)
+                } else {
+                    let mut rate = Vec::new();
+                    let along = Direction {
+                        t: if M::CONSTRAINTS_READ_TIME { 1.0 } else { 0.0 },
+                        q: Some(&v1),
+                        theta: None,
+                    };
+                    let mut finite = true;
+                    along_coordinates(model, (t1, &q1, theta), along, |a, _, sec| {
+                        for (r, &x) in sec.iter().enumerate() {
+                            finite &= x.is_finite();
+                            if x != 0.0 {
+                                rate.push((r, a, x));
+                            }
                         }
+                    });
+                    if !finite {
+                        return Err(non_finite());
                     }
-                });
-                if !finite {
-                    return Err(non_finite());
+                    (Kind::Sparse { terms, rate }, v1)
                 }
-                (Kind::Sparse { terms, rate }, v1)
             }
             None => {
                 let (kind, v1) = self.dense_terms(theta, end)?;
