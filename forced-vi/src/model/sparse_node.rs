@@ -294,6 +294,7 @@ enum ConstraintTarget<'a> {
         curvature: &'a mut [f64],
     },
     /// `H = ∂(G v)/∂q` by its entries `(k, a, Σ_c ∂²g_k/∂q_a∂q_c v_c)`, unsummed.
+    #[cfg_attr(not(feature = "sparse"), allow(dead_code))]
     Rate {
         v: &'a [f64],
         entries: &'a mut Vec<(usize, usize, f64)>,
@@ -351,6 +352,7 @@ impl<'a> ConstraintSink<'a> {
     /// A sink for `g` and for `H = ∂(G v)/∂q` at the velocity `v`, by its entries into
     /// `entries` (cleared here; entries of equal `(k, a)` add up), from the constraints'
     /// second derivatives.
+    #[cfg_attr(not(feature = "sparse"), allow(dead_code))]
     pub(crate) fn rate(
         g: &'a mut [f64],
         v: &'a [f64],
