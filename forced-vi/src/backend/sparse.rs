@@ -341,25 +341,7 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     fn linearize(&mut self) -> Result<(), StepFailure> {
-        if self.tangent.is_none() {
-            let lu = self
-                .newton
-                .lu()
-                .with_same_pattern()
-                .map_err(|_| StepFailure::Newton(NewtonFailure::SingularJacobian))?;
-            self.tangent = Some(SparseNewton::new(lu, *self.newton.options()));
-        }
-        let Some(tangent) = self.tangent.as_mut() else {
-            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
-        };
-        let prob = &mut self.prob;
-        tangent.factor_at(prob, &self.z).map_err(|f| {
-            if prob.outside {
-                StepFailure::OutsidePattern
-            } else {
-                StepFailure::Newton(f)
-            }
-        })
+        self.linearize_with(true)
     }
 
     fn apply_node(&self, i: usize, (dx, dv): (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
@@ -449,7 +431,9 @@ impl StepBackend for SparseBackend<'_> {
     }
 
     fn linearize_transposed(&mut self) -> Result<(), StepFailure> {
-        self.linearize()?;
+        // The backward pass solves with the transpose alone: the Jacobian is assembled,
+        // not factored.
+        self.linearize_with(false)?;
         let Some(tangent) = self.tangent.as_ref() else {
             return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
         };
@@ -545,6 +529,35 @@ impl StepBackend for SparseBackend<'_> {
 }
 
 impl SparseBackend<'_> {
+    /// The step Jacobian at the solution into the tangent's buffers, factored (`factor`)
+    /// or only assembled.
+    fn linearize_with(&mut self, factor: bool) -> Result<(), StepFailure> {
+        if self.tangent.is_none() {
+            let lu = self
+                .newton
+                .lu()
+                .with_same_pattern()
+                .map_err(|_| StepFailure::Newton(NewtonFailure::SingularJacobian))?;
+            self.tangent = Some(SparseNewton::new(lu, *self.newton.options()));
+        }
+        let Some(tangent) = self.tangent.as_mut() else {
+            return Err(StepFailure::Newton(NewtonFailure::SingularJacobian));
+        };
+        let prob = &mut self.prob;
+        let made = if factor {
+            tangent.factor_at(prob, &self.z)
+        } else {
+            tangent.assemble_at(prob, &self.z)
+        };
+        made.map_err(|f| {
+            if prob.outside {
+                StepFailure::OutsidePattern
+            } else {
+                StepFailure::Newton(f)
+            }
+        })
+    }
+
     /// [`StepBackend::sparse_constraint_terms`] with the step's constraints `cons` (taken
     /// out of the step for the call) and the projected end velocity `v1`: at the control
     /// points of the last linearisation, with the step's multipliers, and at the end, whose

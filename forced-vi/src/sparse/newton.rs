@@ -137,6 +137,18 @@ impl SparseNewton {
         LinearSolver::<S>::refresh(&mut self.lu, sys, z).map(|_| ())
     }
 
+    /// Evaluates the Jacobian at `z` into [`Self::lu`]'s values without factoring it: for a
+    /// caller that factors its transpose alone (the adjoint's backward pass).
+    pub(crate) fn assemble_at<S: SparseSystem>(
+        &mut self,
+        sys: &mut S,
+        z: &[f64],
+    ) -> Result<(), NewtonFailure> {
+        self.iteration.have_factors = false;
+        self.iteration.jrow_valid = false;
+        sys.jacobian(z, &mut self.lu.values)
+    }
+
     /// The Jacobian and its factors.
     pub(crate) fn lu(&self) -> &SparseLu {
         &self.lu
