@@ -222,6 +222,35 @@ fn compare<M: ForcedLagrangian<N>, const N: usize>(
     let value = node.lagrangian_value(t, q, v);
     let want = m.lagrangian_at::<f64>(t, q, v);
     prop_assert!(close(value, want, want.abs()));
+    // The parameters' per-term kernels (every model here has parameters, and splits with
+    // them as duals too) against the general kernels' hyper-dual numbers over all `N`.
+    let theta = m.parameter_values();
+    prop_assert!(!theta.is_empty());
+    prop_assert!(node.has_parameter_kernels(), "no parameter kernels");
+    for k in 0..theta.len() {
+        let want = general::node_parameter_gradient_at(m, (t, &qs, &vs), &theta, k);
+        let (mut fq, mut lv) = (vec![0.0; N], vec![0.0; N]);
+        prop_assert!(node.eval_parameter(t, q, v, &theta, k, &mut fq, &mut lv));
+        let scale = want.fq.amax().max(want.lv.amax());
+        for i in 0..N {
+            prop_assert!(
+                close(fq[i], want.fq[i], scale),
+                "d(L_q+F)[{}]/dtheta_{}: {} vs {}",
+                i,
+                k,
+                fq[i],
+                want.fq[i]
+            );
+            prop_assert!(
+                close(lv[i], want.lv[i], scale),
+                "dL_v[{}]/dtheta_{}: {} vs {}",
+                i,
+                k,
+                lv[i],
+                want.lv[i]
+            );
+        }
+    }
     Ok(())
 }
 

@@ -112,7 +112,18 @@ fn entry(
             }
             let read = quiet.check().is_ok();
             let theta = theta.filter(|_| read);
-            expand::generate(&checked, split.as_ref(), theta.as_ref())
+            // A model with per-term kernels gets its parameter derivatives term by term too,
+            // where the Lagrangian read with its parameters as duals still splits (its own
+            // split: a parameter is no longer a constant factor there).
+            let theta_split = theta
+                .as_ref()
+                .filter(|_| split.is_some())
+                .and_then(split::split);
+            expand::generate(
+                &checked,
+                split.as_ref(),
+                theta.as_ref().map(|t| (t, theta_split.as_ref())),
+            )
         }
         (Err(e), _) => fallback::expand(&model, e),
         (Ok(()), None) => fallback::expand(

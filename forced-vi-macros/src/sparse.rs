@@ -2,7 +2,9 @@
 //! (DESIGN §9): one generic function per term of `L` and per force entry, over only the
 //! slots it reads; the hidden kernel `__fvi_sparse`, which loops over the terms and
 //! scatters each term's small gradient and Hessian through an `Accum`; `impl SparseNode`;
-//! and, for large models, the dense kernels through the same code.
+//! for large models, the dense kernels through the same code; and, where the model read
+//! with its parameters as duals splits too, the parameters' per-term kernels
+//! (`__fvi_sparse_theta`, behind `SparseNode::eval_parameter`).
 //!
 //! The term functions are generic over `__D: Scalar` like the rest of the generated code,
 //! so a type error in the user's expression is reported once, not once per dual type.
@@ -197,13 +199,147 @@ fn force_call(l: &Local, name: &Ident) -> TokenStream {
     }
 }
 
+/// The parameters' per-term kernels (DESIGN §12 with §9), from the model checked with its
+/// parameters as duals (`c`) and its own split (`s`): one generic function per term and
+/// force entry, with the parameters read from `__fvi_theta`, and the hidden kernel
+/// `__fvi_sparse_theta`, which adds each term's mixed derivatives `∂²T/∂z∂θ_k` over its own
+/// slots, and each force entry's `∂F/∂θ_k`, through an `Accum`.
+pub fn parameter_helpers(c: &Checked, s: &Split) -> TokenStream {
+    let fvi = fvi();
+    let nd = quote!(#fvi::num_dual);
+    let mut out = TokenStream::new();
+    let mut calls = TokenStream::new();
+    for (k, t) in s.terms.iter().enumerate() {
+        let name = format_ident!("__fvi_ps{}", k);
+        out.extend(theta_term_fn(c, t, &name));
+        let prelude = prelude(t);
+        let var = t.loops.iter().map(|(v, _)| v);
+        calls.extend(looped(
+            t,
+            quote! {
+                #prelude
+                let __fvi_g = #fvi::term_theta_gradient(&__fvi_x, |__fvi_z| {
+                    self.#name::<#nd::HyperDual64>(__fvi_time, #(#var,)* __fvi_z, __fvi_th)
+                });
+                #fvi::add_term(__fvi_acc, &__fvi_s, &__fvi_vel, &__fvi_g, ::core::option::Option::None);
+            },
+        ));
+    }
+    for (k, f) in s.forces.iter().enumerate() {
+        let name = format_ident!("__fvi_psf{}", k);
+        out.extend(theta_term_fn(c, f, &name));
+        let prelude = prelude(f);
+        let row = &f.row;
+        let var = f.loops.iter().map(|(v, _)| v);
+        let inner = quote! {
+            let __fvi_row: usize = #row;
+            #prelude
+            let __fvi_z = #fvi::dual_constants(&__fvi_x);
+            let __fvi_f: f64 = self.#name::<#nd::Dual64>(__fvi_time, #(#var,)* &__fvi_z, __fvi_thd).eps;
+            #fvi::add_force(__fvi_acc, __fvi_row, &__fvi_s, &__fvi_vel, __fvi_f, ::core::option::Option::None);
+        };
+        calls.extend(if f.loops.is_empty() {
+            quote!({ #inner })
+        } else {
+            looped(f, inner)
+        });
+    }
+    out.extend(quote! {
+        #[doc(hidden)]
+        #[inline]
+        #[allow(unused_variables, unused_parens, unused_braces)]
+        fn __fvi_sparse_theta<__A: #fvi::Accum>(
+            &self,
+            __fvi_time: f64,
+            __fvi_qa: &[f64],
+            __fvi_va: &[f64],
+            __fvi_th: &[#nd::HyperDual64],
+            __fvi_thd: &[#nd::Dual64],
+            __fvi_acc: &mut __A,
+        ) {
+            #calls
+        }
+    });
+    out
+}
+
+/// `fn name<__D>(&self, t, [i,] z, theta) -> __D`: a term of the model checked with its
+/// parameters as duals, the parameters read from `theta` (as `lagrangian_with` does).
+fn theta_term_fn(c: &Checked, l: &Local, name: &Ident) -> TokenStream {
+    let fvi = fvi();
+    let k = l.slots.len();
+    let params = c
+        .env
+        .params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| !l.loops.iter().any(|(v, _)| v == *p));
+    let param_binds = params.map(|(i, p)| {
+        quote! {
+            let #p: __D = match __fvi_theta.get(#i) {
+                ::core::option::Option::Some(__fvi_p) => *__fvi_p,
+                ::core::option::Option::None => __D::from(self.#p),
+            };
+        }
+    });
+    let var = l.loops.iter().map(|(v, _)| quote!(#v: usize,));
+    let binds = l.slots.iter().enumerate().map(|(j, s)| {
+        let id = &s.ident;
+        quote!(let #id: __D = __fvi_z[#j];)
+    });
+    let time = Ident::new(TIME, Span::call_site());
+    let t_bind = l
+        .uses_time
+        .then(|| quote!(let #time: __D = __D::from(__fvi_time);));
+    let body = &l.body;
+    let weighted = match &l.weight {
+        Some(w) => quote!(__fvi_val * (#w)),
+        None => quote!(__fvi_val),
+    };
+    quote! {
+        #[doc(hidden)]
+        #[inline(always)]
+        #[allow(unused_variables, unused_braces, unused_parens, non_snake_case)]
+        fn #name<__D: #fvi::Scalar>(&self, __fvi_time: f64, #(#var)* __fvi_z: &[__D; #k], __fvi_theta: &[__D]) -> __D {
+            #( #param_binds )*
+            #(#binds)*
+            #t_bind
+            let __fvi_val: __D = #body;
+            #weighted
+        }
+    }
+}
+
 /// `impl SparseNode` for the model.
-pub fn sparse_impl(c: &Checked) -> TokenStream {
+pub fn sparse_impl(c: &Checked, params: bool) -> TokenStream {
     let fvi = fvi();
     let item = &c.model.item;
     let ident = &item.ident;
     let (ig, tg, wc) = item.generics.split_for_impl();
     let n = &c.n;
+    // With the parameters' per-term kernels (see `parameter_helpers`).
+    let parameter_methods = params.then(|| {
+        quote! {
+            fn has_parameter_kernels(&self) -> bool {
+                true
+            }
+            fn eval_parameter(
+                &self,
+                __fvi_t: f64,
+                __fvi_q: &[f64],
+                __fvi_v: &[f64],
+                __fvi_theta: &[f64],
+                __fvi_k: usize,
+                __fvi_fq: &mut [f64],
+                __fvi_lv: &mut [f64],
+            ) -> bool {
+                let (__fvi_th, __fvi_thd) = #fvi::theta_seeds(__fvi_theta, __fvi_k);
+                let mut __fvi_acc = #fvi::ThetaAccum { fq: __fvi_fq, lv: __fvi_lv };
+                self.__fvi_sparse_theta(__fvi_t, __fvi_q, __fvi_v, &__fvi_th, &__fvi_thd, &mut __fvi_acc);
+                true
+            }
+        }
+    });
     quote! {
         #[automatically_derived]
         impl #ig #fvi::SparseNode for #ident #tg #wc {
@@ -224,6 +360,7 @@ pub fn sparse_impl(c: &Checked) -> TokenStream {
                     _ => f64::NAN,
                 }
             }
+            #parameter_methods
         }
     }
 }

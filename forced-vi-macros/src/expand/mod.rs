@@ -89,7 +89,11 @@ fn param_bindings(env: &Env) -> TokenStream {
 
 /// The generated code for a checked model and its `split` into local terms, if any;
 /// `theta`, the same model checked with its parameters as duals, adds `lagrangian_with` and `force_with` (DESIGN §12).
-pub fn generate(c: &Checked, split: Option<&Split>, theta: Option<&Checked>) -> TokenStream {
+pub fn generate(
+    c: &Checked,
+    split: Option<&Split>,
+    theta: Option<(&Checked, Option<&Split>)>,
+) -> TokenStream {
     let g = Gen::new(c);
     // A model that splits into local terms gets per-term kernels (DESIGN §9); a large one
     // also computes its dense blocks through them.
@@ -115,15 +119,27 @@ pub fn generate(c: &Checked, split: Option<&Split>, theta: Option<&Checked>) -> 
         }
     });
     let check_model = c.checked_index.then(|| g.check_model());
+    // The parameters' per-term kernels, for a model with per-term kernels whose split with
+    // its parameters as duals exists.
+    let theta_split = theta
+        .and_then(|(th, s)| Some((th, s?)))
+        .filter(|_| split.is_some());
+    if let Some((th, s)) = theta_split {
+        helpers.extend(crate::sparse::parameter_helpers(th, s));
+    }
     let (split_items, sparse_impl) = match split {
         Some(s) => {
             helpers.extend(crate::sparse::helpers(c, s));
-            (crate::sparse::trait_items(c), crate::sparse::sparse_impl(c))
+            let params = theta_split.is_some();
+            (
+                crate::sparse::trait_items(c),
+                crate::sparse::sparse_impl(c, params),
+            )
         }
         None => (TokenStream::new(), TokenStream::new()),
     };
     let parameter_items = match theta {
-        Some(th) => Gen::new(th).parameter_items(&mut helpers),
+        Some((th, _)) => Gen::new(th).parameter_items(&mut helpers),
         None => TokenStream::new(),
     };
     let constraint_items = g.constraint_items();

@@ -41,7 +41,8 @@ pub struct Split {
 pub struct Local {
     /// `for var in iter` loops around the term, outermost first (none for a fixed term).
     pub loops: Vec<(Ident, TokenStream)>,
-    /// The constant factor (sign included), an `f64` expression; `None` for 1.
+    /// The constant factor (sign included), an `f64` expression (a `__D` one in a model
+    /// read with its parameters as duals, where it may hold parameters); `None` for 1.
     pub weight: Option<TokenStream>,
     /// For a force entry: its component, a `usize` expression.
     pub row: Option<TokenStream>,
@@ -154,7 +155,7 @@ impl Analysis<'_> {
                 _ => self.leaf(e, loops, weight, out),
             },
             BinOp::Div(_) => match self.constant(&b.right, loops) {
-                Some(f) => self.decompose(&b.left, loops, &with(weight, quote!(1.0 / #f)), out),
+                Some(f) => self.decompose(&b.left, loops, &with(weight, self.reciprocal(f)), out),
                 None => self.leaf(e, loops, weight, out),
             },
             _ => self.leaf(e, loops, weight, out),
@@ -188,18 +189,36 @@ impl Analysis<'_> {
         Some(())
     }
 
-    /// An `f64` constant (literals, parameters and loop variables, no coordinate and no
-    /// time) as tokens.
+    /// A constant factor (literals, parameters and loop variables, no coordinate and no
+    /// time) as tokens: an `f64` expression, or, in a model read with its parameters as
+    /// duals (`params_dual`), a `__D` one (each factor, so that their product is one too).
     fn constant(&self, e: &Expr, loops: &[Loop]) -> Option<TokenStream> {
         let l = quietly(self.env, loops, |lw| lw.expr(e))?;
         // Only parameters by name: not the time, nor a coordinate array (`q.len()`).
-        let constant = matches!(l.kind, Kind::Real | Kind::Int)
-            && l.uses.is_empty()
+        let constant = l.uses.is_empty()
             && l.names
                 .iter()
                 .all(|n| self.env.params.iter().any(|p| p == n))
             && !mentions_coordinate(self.env, e);
-        constant.then(|| l.as_real()).filter(|t| !t.is_empty())
+        let tokens = match l.kind {
+            Kind::Real | Kind::Int if constant => Some(l.as_real()),
+            Kind::Dual if constant && self.env.params_dual => Some(l.as_real()),
+            _ => None,
+        }
+        .filter(|t| !t.is_empty())?;
+        Some(match (self.env.params_dual, l.kind) {
+            (true, Kind::Real | Kind::Int) => quote!(__D::from(#tokens)),
+            _ => tokens,
+        })
+    }
+
+    /// The reciprocal `1 / f` of a constant factor `f` (see [`Self::constant`]).
+    fn reciprocal(&self, f: TokenStream) -> TokenStream {
+        if self.env.params_dual {
+            quote!(__D::from(1.0) / (#f))
+        } else {
+            quote!(1.0 / #f)
+        }
     }
 
     /// `iter.map(|i| body).sum()`: the loop and the body.

@@ -4,6 +4,7 @@
 //! `NodeSink`, or dense blocks).
 
 use nalgebra::{SMatrix, SVector};
+use num_dual::{Dual64, HyperDual64};
 
 use super::int::Int;
 use crate::model::{NodeGradient, NodeJacobian};
@@ -185,4 +186,72 @@ pub fn add_force<A: Accum, const K: usize>(
         let block = if vel[k] { Block::B } else { Block::A };
         acc.add(block, row, s, g[k]);
     }
+}
+
+/// A parameter derivative `∂/∂θ_k` of the node gradient as an [`Accum`]: `∂(L_q + F)/∂θ_k`
+/// into `fq`, `∂L_v/∂θ_k` into `lv` (both zeroed by the caller), no blocks.
+pub struct ThetaAccum<'a> {
+    /// `∂(L_q + F)/∂θ_k`.
+    pub fq: &'a mut [f64],
+    /// `∂L_v/∂θ_k`.
+    pub lv: &'a mut [f64],
+}
+
+impl Accum for ThetaAccum<'_> {
+    #[inline(always)]
+    fn wants_blocks(&self) -> bool {
+        false
+    }
+    #[inline(always)]
+    fn add_lq_f(&mut self, i: usize, x: f64) {
+        if let Some(s) = self.fq.get_mut(i) {
+            *s += x;
+        }
+    }
+    #[inline(always)]
+    fn add_lv(&mut self, i: usize, x: f64) {
+        if let Some(s) = self.lv.get_mut(i) {
+            *s += x;
+        }
+    }
+    #[inline(always)]
+    fn add(&mut self, _: Block, _: usize, _: usize, _: f64) {}
+}
+
+/// The parameters `theta` with `θ_k` seeded: as hyper-dual numbers along `ε₂` (for the
+/// terms of `L`) and as dual numbers (for the force entries).
+pub fn theta_seeds(theta: &[f64], k: usize) -> (Vec<HyperDual64>, Vec<Dual64>) {
+    let unit = |j: usize| if j == k { 1.0 } else { 0.0 };
+    let hyper = (theta.iter().enumerate())
+        .map(|(j, &x)| HyperDual64::new(x, 0.0, unit(j), 0.0))
+        .collect();
+    let dual = (theta.iter().enumerate())
+        .map(|(j, &x)| Dual64::new(x, unit(j)))
+        .collect();
+    (hyper, dual)
+}
+
+/// `∂²T/∂z_j∂θ_k` for every slot `j` of one term `T(z; θ)` at the slot values `x`, where
+/// `term` evaluates it with the parameters seeded along `ε₂` (see [`theta_seeds`]): one
+/// evaluation per slot with `ε₁` along that slot. Scalar hyper-dual numbers, four `f64`
+/// each: one evaluation over all `K` slots together takes vector ones, whose operations
+/// cost more than the `K` evaluations (measured with num-dual's vector types on the
+/// parameter terms of the adjoint).
+#[inline(always)]
+pub fn term_theta_gradient<const K: usize>(
+    x: &SVector<f64, K>,
+    term: impl Fn(&[HyperDual64; K]) -> HyperDual64,
+) -> SVector<f64, K> {
+    SVector::from(core::array::from_fn(|j| {
+        let z: [HyperDual64; K] = core::array::from_fn(|i| {
+            HyperDual64::new(x[i], if i == j { 1.0 } else { 0.0 }, 0.0, 0.0)
+        });
+        term(&z).eps1eps2
+    }))
+}
+
+/// The slot values as constant dual numbers (a force entry differentiated in a parameter).
+#[inline(always)]
+pub fn dual_constants<const K: usize>(x: &SVector<f64, K>) -> [Dual64; K] {
+    core::array::from_fn(|i| Dual64::from(x[i]))
 }

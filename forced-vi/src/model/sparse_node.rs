@@ -279,6 +279,35 @@ pub trait SparseNode {
     fn eval_constraints(&self, t: f64, q: &[f64], sink: &mut ConstraintSink<'_>) {
         let _ = (t, q, sink);
     }
+
+    /// Whether [`Self::eval_parameter`] computes the parameter derivatives (the macro's
+    /// per-term kernels do, for a model whose Lagrangian, read with its parameters as
+    /// dual numbers, still splits into local terms); none by default.
+    fn has_parameter_kernels(&self) -> bool {
+        false
+    }
+
+    /// Adds `∂(L_q + F)/∂θ_k` into `fq` and `∂L_v/∂θ_k` into `lv` (`N` entries each) at
+    /// `(t, q, v)` with the parameters `theta` (the values of
+    /// [`ForcedLagrangian::parameter_values`](crate::ForcedLagrangian::parameter_values)),
+    /// term by term: each term's mixed derivatives over its own slots, at a cost linear in
+    /// the model's size, where the general kernels take hyper-dual numbers over all `N`
+    /// coordinates (`N²`). Returns `false`, adding nothing, where
+    /// [`Self::has_parameter_kernels`] is `false`.
+    #[allow(clippy::too_many_arguments)]
+    fn eval_parameter(
+        &self,
+        t: f64,
+        q: &[f64],
+        v: &[f64],
+        theta: &[f64],
+        k: usize,
+        fq: &mut [f64],
+        lv: &mut [f64],
+    ) -> bool {
+        let _ = (t, q, v, theta, k, fq, lv);
+        false
+    }
 }
 
 enum ConstraintTarget<'a> {
@@ -499,6 +528,23 @@ impl<M: crate::ForcedLagrangian<N>, const N: usize> SparseNode for DualConstrain
 
     fn lagrangian_value(&self, t: f64, q: &[f64], v: &[f64]) -> f64 {
         self.node.lagrangian_value(t, q, v)
+    }
+
+    fn has_parameter_kernels(&self) -> bool {
+        self.node.has_parameter_kernels()
+    }
+
+    fn eval_parameter(
+        &self,
+        t: f64,
+        q: &[f64],
+        v: &[f64],
+        theta: &[f64],
+        k: usize,
+        fq: &mut [f64],
+        lv: &mut [f64],
+    ) -> bool {
+        self.node.eval_parameter(t, q, v, theta, k, fq, lv)
     }
 
     fn sparse_constraint_count(&self) -> usize {

@@ -316,7 +316,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         } else {
             0
         };
-        let need = curvature.max(general::parameter_stack_bytes::<N>());
+        // The parameters' terms take the general kernels' stack unless the per-term kernels
+        // give them.
+        let parameters = if super::tangent::per_term_parameters(self.model) {
+            0
+        } else {
+            general::parameter_stack_bytes::<N>()
+        };
+        let need = curvature.max(parameters);
         Some(with_stack(need, || self.constraint_terms(theta, &step_end)))
     }
 }

@@ -133,7 +133,14 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             } else {
                 0
             };
-            let need = curvature.max(general::parameter_stack_bytes::<N>());
+            // The parameters' terms take the general kernels' stack unless the per-term kernels
+            // give them.
+            let parameters = if per_term_parameters(self.model) {
+                0
+            } else {
+                general::parameter_stack_bytes::<N>()
+            };
+            let need = curvature.max(parameters);
             let end = self.step_end();
             Some(with_stack(need, || self.constraint_terms(&theta, &end))?)
         } else {
@@ -168,7 +175,9 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             Ok(())
         };
-        if np > 0 {
+        if np > 0 && per_term_parameters(model) {
+            nodes(&mut tg.pnode, &tg.theta)?;
+        } else if np > 0 {
             with_stack(general::parameter_stack_bytes::<N>(), || {
                 nodes(&mut tg.pnode, &tg.theta)
             })?;
@@ -222,7 +231,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 }
 
-/// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` at `(t, q, v)`, on a stack deep enough for its dual
+/// Whether the model's per-term kernels give its parameter derivatives
+/// ([`crate::model::SparseNode::eval_parameter`]), in time linear in its size.
+pub(super) fn per_term_parameters<M: ForcedLagrangian<N>, const N: usize>(model: &M) -> bool {
+    model
+        .sparse_node()
+        .is_some_and(|node| node.has_parameter_kernels())
+}
+
+/// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` at `(t, q, v)`: from the model's per-term kernels where
+/// it has them, else from the general kernels on a stack deep enough for their dual
 /// numbers.
 pub(super) fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
     model: &M,
@@ -230,6 +248,19 @@ pub(super) fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
     theta: &[f64],
     k: usize,
 ) -> NodeGradient<N> {
+    if let Some(node) = model
+        .sparse_node()
+        .filter(|node| node.has_parameter_kernels())
+    {
+        let mut g = NodeGradient::<N> {
+            fq: SVector::zeros(),
+            lv: SVector::zeros(),
+        };
+        let (fq, lv) = (g.fq.as_mut_slice(), g.lv.as_mut_slice());
+        if node.eval_parameter(t, q, v, theta, k, fq, lv) {
+            return g;
+        }
+    }
     let (q, v) = (SVector::from_column_slice(q), SVector::from_column_slice(v));
     with_stack(general::parameter_stack_bytes::<N>(), || {
         general::node_parameter_gradient_at(model, (t, &q, &v), theta, k)
