@@ -14,7 +14,8 @@ fn close(a: f64, b: f64) -> bool {
 }
 
 /// Checks the claims and kernels of one model at `(q, v)` and at a second point `(q2, v2)`.
-/// Returns which claims were made: (no force, force without velocity, constant mass).
+/// Returns which claims were made: (no force, force without velocity, constant mass,
+/// linear), and whether the model has the parameters' per-term kernels.
 fn check<M: ForcedLagrangian<N>, const N: usize>(
     name: &str,
     m: &M,
@@ -22,7 +23,7 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
     v: [f64; N],
     q2: [f64; N],
     v2: [f64; N],
-) -> [bool; 4] {
+) -> [bool; 5] {
     let s = M::STRUCTURE;
     // The promise of no constraints (the runtime then compiles no constraint code).
     assert!(
@@ -48,6 +49,7 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
         fw.iter().zip(&f).all(|(a, b)| close(*a, *b)),
         "{name}: force_with"
     );
+    let node = m.sparse_node().filter(|node| node.has_parameter_kernels());
     let k = m.node_jacobian(&qs, &vs);
     let g = general::node_jacobian(m, &qs, &vs);
     let blocks = |j: &forced_vi::NodeJacobian<N>| -> Vec<f64> {
@@ -75,7 +77,35 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
             !s.force_uses_velocity,
             s.constant_mass,
             s.linear,
+            node.is_some(),
         ];
+    }
+    // The parameters' per-term kernels, where the model has them (it splits into local
+    // terms with its parameters as duals), against the general kernels' hyper-dual numbers,
+    // inside the model's domain (outside it, a term's NaN reaches every derivative of that
+    // term here, where the general kernels skip the derivatives a parameter cannot reach).
+    if let Some(node) = node {
+        for k in 0..theta.len() {
+            let want = general::node_parameter_gradient_at(m, (0.0, &qs, &vs), &theta, k);
+            if want.fq.iter().chain(want.lv.iter()).any(|x| !x.is_finite()) {
+                continue;
+            }
+            let (mut fq, mut lv) = (vec![0.0; N], vec![0.0; N]);
+            assert!(
+                node.eval_parameter(0.0, &q, &v, &theta, k, &mut fq, &mut lv),
+                "{name}: eval_parameter"
+            );
+            for i in 0..N {
+                assert!(
+                    close(fq[i], want.fq[i]) && close(lv[i], want.lv[i]),
+                    "{name}: parameter {k}, coordinate {i}: ({}, {}) against ({}, {})",
+                    fq[i],
+                    lv[i],
+                    want.fq[i],
+                    want.lv[i]
+                );
+            }
+        }
     }
     let pairs = [
         ("fq", k.grad.fq.as_slice(), g.grad.fq.as_slice()),
@@ -154,6 +184,7 @@ fn check<M: ForcedLagrangian<N>, const N: usize>(
         !s.force_uses_velocity,
         s.constant_mass,
         s.linear,
+        node.is_some(),
     ]
 }
 
@@ -550,7 +581,7 @@ fn pick<const N: usize>(p: &[f64], which: usize) -> [f64; N] {
     std::array::from_fn(|i| p[(which * 3 + i) % p.len()])
 }
 
-fn check_all(p: &[f64], pa: f64, pb: f64) -> Vec<[bool; 4]> {
+fn check_all(p: &[f64], pa: f64, pb: f64) -> Vec<[bool; 5]> {
     let mut claims = Vec::new();
     let m = Gen00 { a: pa, b: pb };
     claims.push(check(
@@ -934,7 +965,7 @@ proptest! {
 fn trust_generated_models_make_claims_both_ways() {
     let p: Vec<f64> = (0..12).map(|i| 0.1 * i as f64 - 0.55).collect();
     let claims = check_all(&p, 1.0, 0.3);
-    for k in 0..4 {
+    for k in 0..5 {
         assert!(
             claims.iter().any(|c| c[k]) && claims.iter().any(|c| !c[k]),
             "claim {k}"

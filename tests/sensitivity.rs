@@ -12,7 +12,7 @@ use forced_vi::{
 use forced_vi_models::large::FpuChain;
 use forced_vi_models::models::{
     CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing, KapitzaPendulum,
-    KeplerDrag,
+    KeplerDrag, SpringChain,
 };
 use nalgebra::{DMatrix, SVector};
 
@@ -466,6 +466,25 @@ fn sensitivity_parameters_match_central_differences() {
         (Scheme::lobatto(3).expect("scheme"), 0.05),
         InitialState::from_velocity([1.0, -0.5], [0.0, 0.3]),
         5.0,
+    );
+    // A const-generic chain, whose parameters' node terms come from its per-term kernels
+    // (`SparseNode::eval_parameter`), the mass `m` among them.
+    check_parameters(
+        "spring_chain 8",
+        |th: &[f64]| {
+            let d = SpringChain::<8>::FPU;
+            let p = pick(th, &[d.m, d.k, d.beta, d.c]);
+            SpringChain::<8> {
+                m: p[0],
+                k: p[1],
+                beta: p[2],
+                c: p[3],
+            }
+        },
+        &["m", "k", "beta", "c"],
+        (Scheme::lobatto(4).expect("scheme"), 0.05),
+        FpuChain::<8>::initial(),
+        3.0,
     );
 }
 
