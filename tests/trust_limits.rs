@@ -69,6 +69,71 @@ fn trust_large_models_run_on_a_small_stack() {
     });
 }
 
+/// The adjoint of that model (8192 coordinates, 4 parameters) on a thread of 2 MiB: it takes
+/// the parameters' terms by scalar contractions, so it is not refused as the forward
+/// sensitivities are. Its gradient in the parameters against central differences of the
+/// loss `½ |q_T|²`.
+#[test]
+fn trust_large_models_take_the_adjoint_in_their_parameters() {
+    const N: usize = 8192;
+    on_stack(2 << 20, || {
+        let m = SpringChain::<N>::FPU;
+        let init = large_initial::<N>();
+        let integ = Integrator::new(&m, Scheme::lobatto(2).unwrap(), 0.05).unwrap();
+        let theta = m.parameter_values();
+        let grad = adjoint_in_parameters(&integ, init);
+        for (k, g) in grad.iter().enumerate() {
+            let d = 1e-5 * theta[k].abs().max(1.0);
+            let fd = (loss_at(&theta, k, d, init) - loss_at(&theta, k, -d, init)) / (2.0 * d);
+            assert!(
+                (g - fd).abs() <= 1e-6 * fd.abs().max(1e-3),
+                "parameter {k}: adjoint {g:e}, central differences {fd:e}"
+            );
+        }
+    });
+}
+
+/// The initial state of the large-model tests: a small sine bump, at rest.
+#[inline(never)]
+fn large_initial<const N: usize>() -> InitialState<N> {
+    let mut q = Box::new([0.0; N]);
+    for (i, x) in q.iter_mut().enumerate() {
+        *x = 0.1 * (std::f64::consts::PI * (i + 1) as f64 / (N as f64 + 1.0)).sin();
+    }
+    InitialState::from_velocity(*q, [0.0; N])
+}
+
+/// `∂ℓ/∂θ` of `ℓ = ½ |q_T|²` (T = 0.2) by the adjoint, in a frame of its own (its results
+/// hold `[f64; N]` values, which the caller's 2 MiB thread has no room for all at once).
+#[inline(never)]
+fn adjoint_in_parameters<const N: usize>(
+    integ: &Integrator<'_, SpringChain<N>, N>,
+    init: InitialState<N>,
+) -> Vec<f64> {
+    let grad = integ
+        .solve(init, 0.2, output::adjoint(|e| (e.q, SVector::zeros())))
+        .unwrap();
+    grad.wrt_parameters.iter().copied().collect()
+}
+
+/// `ℓ = ½ |q_T|²` with parameter `k` of `theta` moved by `d` (lobatto2, h = 0.05, T = 0.2).
+#[inline(never)]
+fn loss_at<const N: usize>(theta: &[f64], k: usize, d: f64, init: InitialState<N>) -> f64 {
+    let mut th = theta.to_vec();
+    th[k] += d;
+    let model = SpringChain::<N> {
+        m: th[0],
+        k: th[1],
+        beta: th[2],
+        c: th[3],
+    };
+    let end = Integrator::new(&model, Scheme::lobatto(2).unwrap(), 0.05)
+        .unwrap()
+        .final_state(init, 0.2)
+        .unwrap();
+    0.5 * end.q.iter().map(|x| x * x).sum::<f64>()
+}
+
 /// A model with no coordinates: a typed error, where a run panicked in nalgebra.
 #[test]
 fn trust_a_model_without_coordinates_is_refused() {

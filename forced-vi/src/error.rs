@@ -151,6 +151,9 @@ pub enum Error {
     /// A sensitivity run of a model with parameters whose dual numbers, over every
     /// coordinate and one parameter, would need more stack than
     /// [`crate::MAX_KERNEL_STACK`] (they grow like `N²`): refused before the first step.
+    /// The forward sensitivities (`output::Tangents`) keep this bound for every such model;
+    /// the adjoint (`output::adjoint`) meets it only with constraints and without the
+    /// per-term parameter kernels (its other parameter terms are scalar contractions).
     #[error(
         "the sensitivities in the parameters of a model of {dof} coordinates need {stack_bytes} bytes of stack for their dual numbers (at most {max})"
     )]

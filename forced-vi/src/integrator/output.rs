@@ -344,7 +344,13 @@ where
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<AdjointGradient<N>, RunFailure<N>> {
-        refuse_large(integ)?;
+        // The backward pass takes the parameters' terms by contractions, whose dual numbers
+        // are scalars; only a constrained step's terms take the general parameter kernels,
+        // where the model has no per-term ones.
+        let per_term = (integ.model.sparse_node()).is_some_and(|node| node.has_parameter_kernels());
+        if M::CONSTRAINED && integ.model.constraint_count() > 0 && !per_term {
+            refuse_large(integ)?;
+        }
         open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.keep_tape().map_err(|e| stepper.failure(e))?;
@@ -371,8 +377,11 @@ where
     }
 }
 
-/// The parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a stack
-/// that could not be mapped would end the process.
+/// The general parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a
+/// stack that could not be mapped would end the process. The forward sensitivities keep
+/// this bound even where the per-term kernels give the parameters' terms
+/// ([`crate::model::SparseNode::eval_parameter`]): past it (about 5800 coordinates) their
+/// `2N × (2N + P)` matrix takes about a gigabyte and a solve per column and step.
 fn refuse_large<M: ForcedLagrangian<N>, const N: usize>(
     integ: &Integrator<'_, M, N>,
 ) -> Result<(), RunFailure<N>> {
