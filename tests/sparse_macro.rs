@@ -2,7 +2,9 @@
 //! Lagrangian splits into local terms, `SparseNode::eval` against the runtime's general dense
 //! kernels (whole-model dual numbers, independent of the per-term code) at random states:
 //! gradient and blocks agree to round-off, and every dense nonzero lies in the recorded
-//! pattern. A model with a whole-array term gets no `SparseNode`.
+//! pattern; so do the parameters' per-term kernels (`SparseNode::eval_parameter`) with the
+//! general kernels' hyper-dual numbers over all `N`. A model with a whole-array term gets no
+//! `SparseNode`.
 
 use forced_vi::model::general;
 use forced_vi::prelude::*;

@@ -115,9 +115,10 @@ fn entry(
             // A model with per-term kernels gets its parameter derivatives term by term too,
             // where the Lagrangian read with its parameters as duals still splits (its own
             // split: a parameter is no longer a constant factor there).
+            // None for a model without parameters: nothing would call them.
             let theta_split = theta
                 .as_ref()
-                .filter(|_| split.is_some())
+                .filter(|t| split.is_some() && !t.env.params.is_empty())
                 .and_then(split::split);
             expand::generate(
                 &checked,
