@@ -972,3 +972,20 @@ fn trust_generated_models_make_claims_both_ways() {
         );
     }
 }
+
+/// A point where `Gen29`'s Lagrangian takes the logarithm of a negative number: its value
+/// is NaN and its derivatives finite, in the general kernels and in the parameters'
+/// per-term kernels alike (the per-term kernels once gave NaN here, from `0 · NaN` in
+/// scalar hyper-dual numbers; found by the comparison above with another seed).
+#[test]
+fn trust_generated_models_agree_where_a_value_is_nan() {
+    let mut p = vec![0.0; 12];
+    p[..5].copy_from_slice(&[
+        -0.89851950322915,
+        0.6498043515027602,
+        0.0,
+        0.4208960961028378,
+        -0.5002425910815436,
+    ]);
+    let _ = check_all(&p, 0.5, 0.0);
+}

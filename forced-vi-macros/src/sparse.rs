@@ -214,16 +214,22 @@ pub fn parameter_helpers(c: &Checked, s: &Split) -> TokenStream {
         out.extend(theta_term_fn(c, t, &name));
         let prelude = prelude(t);
         let var = t.loops.iter().map(|(v, _)| v);
-        calls.extend(looped(
+        let k = t.slots.len();
+        let term = looped(
             t,
             quote! {
                 #prelude
                 let __fvi_g = #fvi::term_theta_gradient(&__fvi_x, |__fvi_z| {
-                    self.#name::<#nd::HyperDual64>(__fvi_time, #(#var,)* __fvi_z, __fvi_th)
+                    self.#name::<#nd::HyperDualSVec64<#k, 1>>(__fvi_time, #(#var,)* __fvi_z, &__fvi_th)
                 });
                 #fvi::add_term(__fvi_acc, &__fvi_s, &__fvi_vel, &__fvi_g, ::core::option::Option::None);
             },
-        ));
+        );
+        // The parameters as this term's numbers, once for all its loop's values.
+        calls.extend(quote! {{
+            let __fvi_th = #fvi::theta_hyper::<#k>(__fvi_theta, __fvi_k);
+            #term
+        }});
     }
     for (k, f) in s.forces.iter().enumerate() {
         let name = format_ident!("__fvi_psf{}", k);
@@ -235,7 +241,7 @@ pub fn parameter_helpers(c: &Checked, s: &Split) -> TokenStream {
             let __fvi_row: usize = #row;
             #prelude
             let __fvi_z = #fvi::dual_constants(&__fvi_x);
-            let __fvi_f: f64 = self.#name::<#nd::Dual64>(__fvi_time, #(#var,)* &__fvi_z, __fvi_thd).eps;
+            let __fvi_f: f64 = #fvi::dual_part(&self.#name::<#nd::DualSVec64<1>>(__fvi_time, #(#var,)* &__fvi_z, &__fvi_thd));
             #fvi::add_force(__fvi_acc, __fvi_row, &__fvi_s, &__fvi_vel, __fvi_f, ::core::option::Option::None);
         };
         calls.extend(if f.loops.is_empty() {
@@ -253,10 +259,11 @@ pub fn parameter_helpers(c: &Checked, s: &Split) -> TokenStream {
             __fvi_time: f64,
             __fvi_qa: &[f64],
             __fvi_va: &[f64],
-            __fvi_th: &[#nd::HyperDual64],
-            __fvi_thd: &[#nd::Dual64],
+            __fvi_theta: &[f64],
+            __fvi_k: usize,
             __fvi_acc: &mut __A,
         ) {
+            let __fvi_thd = #fvi::theta_dual(__fvi_theta, __fvi_k);
             #calls
         }
     });
@@ -333,9 +340,8 @@ pub fn sparse_impl(c: &Checked, params: bool) -> TokenStream {
                 __fvi_fq: &mut [f64],
                 __fvi_lv: &mut [f64],
             ) -> bool {
-                let (__fvi_th, __fvi_thd) = #fvi::theta_seeds(__fvi_theta, __fvi_k);
                 let mut __fvi_acc = #fvi::ThetaAccum { fq: __fvi_fq, lv: __fvi_lv };
-                self.__fvi_sparse_theta(__fvi_t, __fvi_q, __fvi_v, &__fvi_th, &__fvi_thd, &mut __fvi_acc);
+                self.__fvi_sparse_theta(__fvi_t, __fvi_q, __fvi_v, __fvi_theta, __fvi_k, &mut __fvi_acc);
                 true
             }
         }

@@ -4,7 +4,7 @@
 //! `NodeSink`, or dense blocks).
 
 use nalgebra::{SMatrix, SVector};
-use num_dual::{Dual64, HyperDual64};
+use num_dual::{DualSVec64, HyperDualSVec64};
 
 use super::int::Int;
 use crate::model::{NodeGradient, NodeJacobian};
@@ -218,40 +218,55 @@ impl Accum for ThetaAccum<'_> {
     fn add(&mut self, _: Block, _: usize, _: usize, _: f64) {}
 }
 
-/// The parameters `theta` with `θ_k` seeded: as hyper-dual numbers along `ε₂` (for the
-/// terms of `L`) and as dual numbers (for the force entries).
-pub fn theta_seeds(theta: &[f64], k: usize) -> (Vec<HyperDual64>, Vec<Dual64>) {
-    let unit = |j: usize| if j == k { 1.0 } else { 0.0 };
-    let hyper = (theta.iter().enumerate())
-        .map(|(j, &x)| HyperDual64::new(x, 0.0, unit(j), 0.0))
-        .collect();
-    let dual = (theta.iter().enumerate())
-        .map(|(j, &x)| Dual64::new(x, unit(j)))
-        .collect();
-    (hyper, dual)
+/// The parameters `theta` with `θ_k` seeded along `ε₂`, as the hyper-dual numbers of a term
+/// of `K` slots (see [`term_theta_gradient`]).
+pub fn theta_hyper<const K: usize>(theta: &[f64], k: usize) -> Vec<HyperDualSVec64<K, 1>> {
+    (theta.iter().enumerate())
+        .map(|(j, &x)| {
+            let h = HyperDualSVec64::<K, 1>::from_re(x);
+            if j == k { h.derivative2(0) } else { h }
+        })
+        .collect()
+}
+
+/// The parameters `theta` with `θ_k` seeded, as dual numbers (for the force entries).
+pub fn theta_dual(theta: &[f64], k: usize) -> Vec<DualSVec64<1>> {
+    (theta.iter().enumerate())
+        .map(|(j, &x)| {
+            let d = DualSVec64::<1>::from_re(x);
+            if j == k { d.derivative(0) } else { d }
+        })
+        .collect()
 }
 
 /// `∂²T/∂z_j∂θ_k` for every slot `j` of one term `T(z; θ)` at the slot values `x`, where
-/// `term` evaluates it with the parameters seeded along `ε₂` (see [`theta_seeds`]): one
-/// evaluation per slot with `ε₁` along that slot. Scalar hyper-dual numbers, four `f64`
-/// each: one evaluation over all `K` slots together takes vector ones, whose operations
-/// cost more than the `K` evaluations (measured with num-dual's vector types on the
-/// parameter terms of the adjoint).
+/// `term` evaluates it with the parameters from [`theta_hyper`]: one evaluation with `ε₁`
+/// along the slots. The same kind of numbers as the general kernels' (num-dual's vector
+/// hyper-duals, whose parts a value does not depend on are absent rather than zero), so a
+/// term whose value is NaN where its derivatives are finite (a logarithm of a negative
+/// number) gives the same finite derivatives here: with scalar hyper-duals, `0 · NaN` made
+/// them NaN (found by the generated models' comparison).
 #[inline(always)]
 pub fn term_theta_gradient<const K: usize>(
     x: &SVector<f64, K>,
-    term: impl Fn(&[HyperDual64; K]) -> HyperDual64,
+    term: impl Fn(&[HyperDualSVec64<K, 1>; K]) -> HyperDualSVec64<K, 1>,
 ) -> SVector<f64, K> {
-    SVector::from(core::array::from_fn(|j| {
-        let z: [HyperDual64; K] = core::array::from_fn(|i| {
-            HyperDual64::new(x[i], if i == j { 1.0 } else { 0.0 }, 0.0, 0.0)
-        });
-        term(&z).eps1eps2
-    }))
+    let z: [HyperDualSVec64<K, 1>; K] =
+        core::array::from_fn(|i| HyperDualSVec64::<K, 1>::from_re(x[i]).derivative1(i));
+    match term(&z).eps1eps2.0 {
+        Some(m) => SVector::from(core::array::from_fn(|i| m[(i, 0)])),
+        None => SVector::zeros(),
+    }
 }
 
 /// The slot values as constant dual numbers (a force entry differentiated in a parameter).
 #[inline(always)]
-pub fn dual_constants<const K: usize>(x: &SVector<f64, K>) -> [Dual64; K] {
-    core::array::from_fn(|i| Dual64::from(x[i]))
+pub fn dual_constants<const K: usize>(x: &SVector<f64, K>) -> [DualSVec64<1>; K] {
+    core::array::from_fn(|i| DualSVec64::<1>::from_re(x[i]))
+}
+
+/// The derivative part of a force entry evaluated with [`theta_dual`].
+#[inline(always)]
+pub fn dual_part(f: &DualSVec64<1>) -> f64 {
+    f.eps.0.map_or(0.0, |e| e[0])
 }
