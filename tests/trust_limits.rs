@@ -6,6 +6,7 @@
 
 use forced_vi::prelude::*;
 use forced_vi::{Error, Tolerance};
+use forced_vi_models::large::FpuChain;
 use forced_vi_models::models::{DrivenDuffing, SpringChain};
 use nalgebra::SVector;
 
@@ -62,10 +63,55 @@ fn trust_large_models_run_on_a_small_stack() {
         let bad = InitialState::from_velocity([f64::NAN; N], [0.0; N]);
         let err = integ.solve(bad, 0.2, output::Records).unwrap_err().error;
         assert!(matches!(err, Error::NonFiniteInitialData { .. }), "{err}");
-        // Derivatives in the parameters over 8192 coordinates would take 8.6 GB of stack
-        // for their dual numbers: refused, where mapping that stack failed with a panic.
+        // The forward sensitivities' tangent over 8192 coordinates and 4 parameters,
+        // 16388 columns of 16384 numbers (2.1 GB, kept twice): refused before the first step.
+        // (Without the per-term parameter kernels, their dual numbers would have needed
+        // 8.6 GB of stack, whose mapping failed with a panic.)
         let err = integ.solve(init, 0.2, output::Tangents).unwrap_err().error;
-        assert!(matches!(err, Error::SensitivitiesTooLarge { .. }), "{err}");
+        let Error::TangentTooLarge {
+            dof,
+            columns,
+            bytes,
+            max,
+        } = err
+        else {
+            panic!("{err}");
+        };
+        assert_eq!(
+            (dof, columns, bytes),
+            (N, 2 * N + 4, 2 * N * (2 * N + 4) * 8)
+        );
+        assert_eq!(max, forced_vi::MAX_TANGENT_BYTES);
+    });
+}
+
+/// A model without parameters past the tangent's bound: its forward sensitivities were not
+/// bounded at all, and at 16384 coordinates asked for 8.6 GB twice over (three times while
+/// the result was copied out), where a failed allocation aborts the process. Refused with
+/// the typed error, on a thread of 2 MiB; at the largest size under the bound, the
+/// sensitivities run.
+#[test]
+fn trust_large_models_refuse_forward_sensitivities_past_the_tangent_bound() {
+    on_stack(2 << 20, || {
+        const N: usize = 16384;
+        let m = FpuChain::<N>::default();
+        let integ = Integrator::new(&m, Scheme::lobatto(2).unwrap(), 0.05).unwrap();
+        let err = (integ.solve(large_initial::<N>(), 0.1, output::Tangents))
+            .unwrap_err()
+            .error;
+        assert!(
+            matches!(err, Error::TangentTooLarge { dof: N, .. }),
+            "{err}"
+        );
+    });
+    on_stack(2 << 20, || {
+        const N: usize = 64;
+        let m = FpuChain::<N>::default();
+        let integ = Integrator::new(&m, Scheme::lobatto(2).unwrap(), 0.05).unwrap();
+        let sens = integ.solve(large_initial::<N>(), 0.1, output::Tangents);
+        let sens = sens.unwrap();
+        assert_eq!(sens.wrt_initial.shape(), (2 * N, 2 * N));
+        assert_eq!(sens.wrt_parameters.shape(), (2 * N, 0));
     });
 }
 

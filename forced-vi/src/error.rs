@@ -151,9 +151,10 @@ pub enum Error {
     /// A sensitivity run of a model with parameters whose dual numbers, over every
     /// coordinate and one parameter, would need more stack than
     /// [`crate::MAX_KERNEL_STACK`] (they grow like `N²`): refused before the first step.
-    /// The forward sensitivities (`output::Tangents`) keep this bound for every such model;
-    /// the adjoint (`output::adjoint`) meets it only with constraints and without the
-    /// per-term parameter kernels (its other parameter terms are scalar contractions).
+    /// It applies to a model without the per-term parameter kernels
+    /// ([`crate::model::SparseNode::eval_parameter`]): for the forward sensitivities
+    /// (`output::Tangents`) always, for the adjoint (`output::adjoint`) only with constraints
+    /// (its other parameter terms are scalar contractions).
     #[error(
         "the sensitivities in the parameters of a model of {dof} coordinates need {stack_bytes} bytes of stack for their dual numbers (at most {max})"
     )]
@@ -163,6 +164,23 @@ pub enum Error {
         /// The stack the parameters' kernels need.
         stack_bytes: usize,
         /// The cap on it.
+        max: usize,
+    },
+    /// Forward sensitivities (`output::Tangents`) whose tangent, `2N` rows by `2N + P`
+    /// columns, would take more than [`crate::MAX_TANGENT_BYTES`]: refused before the first
+    /// step, where the run would have ended in an allocation failure. The adjoint
+    /// (`output::adjoint`) gives the gradient of a loss at every model size.
+    #[error(
+        "the forward sensitivities of a model of {dof} coordinates carry a tangent of {columns} columns, {bytes} bytes (at most {max}); the adjoint (output::adjoint) gives the gradient of a loss at any size"
+    )]
+    TangentTooLarge {
+        /// The model's coordinates `N`.
+        dof: usize,
+        /// The tangent's columns, `2N + P`.
+        columns: usize,
+        /// The bytes of the tangent.
+        bytes: usize,
+        /// The cap on them.
         max: usize,
     },
     /// A tolerance is negative, not finite, or zero together with its partner.
@@ -404,6 +422,7 @@ impl Error {
             Error::TooManyRecords { .. } => "too_many_records".into(),
             Error::ModelTooLarge { .. } => "model_too_large".into(),
             Error::SensitivitiesTooLarge { .. } => "sensitivities_too_large".into(),
+            Error::TangentTooLarge { .. } => "tangent_too_large".into(),
             Error::VelocitySolveFailed { .. } => "velocity_solve_failed".into(),
             Error::Overflow { .. } => "overflow".into(),
             Error::SingularMassMatrix { .. } => "singular_mass_matrix".into(),

@@ -98,7 +98,9 @@ pub mod trajectory;
 pub use control::Tolerance;
 pub use error::{Error, NewtonFailure, SchemeError};
 pub use initial::InitialState;
-pub use integrator::{Integrator, LinearPath, MAX_KERNEL_STACK, Runs, StepOptions, output};
+pub use integrator::{
+    Integrator, LinearPath, MAX_KERNEL_STACK, MAX_TANGENT_BYTES, Runs, StepOptions, output,
+};
 pub use model::{ForcedLagrangian, NodeGradient, NodeJacobian, Structure};
 pub use newton::{Newton, NewtonOptions, NewtonReport, NonlinearSystem};
 pub use scalar::{Scalar, lift};

@@ -28,6 +28,11 @@ pub use run::Runs;
 /// lazily: only the pages the kernels touch use memory).
 pub const MAX_KERNEL_STACK: usize = 4 << 30;
 
+/// The largest tangent the forward sensitivities (`output::Tangents`) carry: `2N × (2N + P)`
+/// numbers, kept twice while a step is subdivided (1 GiB, about 5800 coordinates without
+/// parameters). Past it a run is [`Error::TangentTooLarge`]; the adjoint has no such bound.
+pub const MAX_TANGENT_BYTES: usize = 1 << 30;
+
 /// A fixed-step variational integrator for one model and one scheme.
 ///
 /// ```

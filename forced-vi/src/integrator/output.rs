@@ -309,7 +309,10 @@ impl<const N: usize> Output<N> for Tangents {
         init: InitialState<N>,
         t_final: f64,
     ) -> Result<Sensitivities<N>, RunFailure<N>> {
-        refuse_large(integ)?;
+        if !per_term_parameters(integ) {
+            refuse_large(integ)?;
+        }
+        refuse_large_tangent(integ)?;
         open(integ, slot, init, t_final, |stepper| {
             stepper.set_lean(true);
             stepper.track_tangent().map_err(|e| stepper.failure(e))?;
@@ -347,8 +350,7 @@ where
         // The backward pass takes the parameters' terms by contractions, whose dual numbers
         // are scalars; only a constrained step's terms take the general parameter kernels,
         // where the model has no per-term ones.
-        let per_term = (integ.model.sparse_node()).is_some_and(|node| node.has_parameter_kernels());
-        if M::CONSTRAINED && integ.model.constraint_count() > 0 && !per_term {
+        if M::CONSTRAINED && integ.model.constraint_count() > 0 && !per_term_parameters(integ) {
             refuse_large(integ)?;
         }
         open(integ, slot, init, t_final, |stepper| {
@@ -377,11 +379,38 @@ where
     }
 }
 
+/// Whether the model's per-term kernels give its parameters' terms
+/// ([`crate::model::SparseNode::eval_parameter`]), with no dual numbers over every coordinate.
+fn per_term_parameters<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+) -> bool {
+    (integ.model.sparse_node()).is_some_and(|node| node.has_parameter_kernels())
+}
+
+/// The forward sensitivities' tangent, `2N × (2N + P)` numbers: refused past
+/// [`crate::MAX_TANGENT_BYTES`] before anything is allocated (an allocation that failed
+/// would end the process; at 16384 coordinates it is 8.6 GB, kept twice).
+fn refuse_large_tangent<M: ForcedLagrangian<N>, const N: usize>(
+    integ: &Integrator<'_, M, N>,
+) -> Result<(), RunFailure<N>> {
+    let columns = (2 * N).saturating_add(integ.model.parameter_names().len());
+    let bytes = (2 * N)
+        .saturating_mul(columns)
+        .saturating_mul(std::mem::size_of::<f64>());
+    if bytes > crate::MAX_TANGENT_BYTES {
+        return Err(RunFailure::new(Error::TangentTooLarge {
+            dof: N,
+            columns,
+            bytes,
+            max: crate::MAX_TANGENT_BYTES,
+        }));
+    }
+    Ok(())
+}
+
 /// The general parameters' kernels take hyper-dual numbers over every coordinate (`N²`): a
-/// stack that could not be mapped would end the process. The forward sensitivities keep
-/// this bound even where the per-term kernels give the parameters' terms
-/// ([`crate::model::SparseNode::eval_parameter`]): past it (about 5800 coordinates) their
-/// `2N × (2N + P)` matrix takes about a gigabyte and a solve per column and step.
+/// stack that could not be mapped would end the process. Not asked of a model whose
+/// per-term kernels give the parameters' terms.
 fn refuse_large<M: ForcedLagrangian<N>, const N: usize>(
     integ: &Integrator<'_, M, N>,
 ) -> Result<(), RunFailure<N>> {

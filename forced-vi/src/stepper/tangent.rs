@@ -204,19 +204,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     }
 
     fn tangent_in_velocities_here(&mut self) -> Result<(DMatrix<f64>, DMatrix<f64>), Error> {
-        let Some(tg) = self.tangent.as_ref() else {
+        // Taken, not copied: the tangent is the run's last use of it, and up to
+        // `crate::MAX_TANGENT_BYTES` large.
+        let Some(tg) = self.tangent.take() else {
             return Ok((DMatrix::zeros(2 * N, 0), DMatrix::zeros(2 * N, 0)));
         };
-        let cols = tg.columns(N);
-        let mut out = DMatrix::from_column_slice(2 * N, cols, &tg.m);
+        let Tangent { mut m, theta, .. } = *tg;
+        let cols = m.len() / (2 * N);
+        let params = m.split_off(4 * N * N);
+        let mut wrt_initial = DMatrix::from_vec(2 * N, 2 * N, m);
+        let mut wrt_parameters = DMatrix::from_vec(2 * N, cols - 2 * N, params);
         let st = &self.state;
         let at = (self.t, &st.q.sum[..], &st.v[..]);
         let mut dv = vec![0.0; N];
-        for (c, mut col) in out.column_iter_mut().enumerate() {
+        let columns = (wrt_initial.column_iter_mut().map(|c| (None, c)))
+            .chain((wrt_parameters.column_iter_mut().enumerate()).map(|(k, c)| (Some(k), c)));
+        for (k, mut col) in columns {
             let (dq, dp) = col.as_mut_slice().split_at_mut(N);
-            if let Some(k) = c.checked_sub(2 * N) {
+            if let Some(k) = k {
                 // E dv = dp − C dq − ∂L_v/∂θ_k.
-                let g = parameter_gradient(self.model, at, &tg.theta, k);
+                let g = parameter_gradient(self.model, at, &theta, k);
                 check_parameter_gradient(&g, self.t)?;
                 dp.iter_mut().zip(g.lv.iter()).for_each(|(x, y)| *x -= y);
             }
@@ -225,8 +232,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                 .map_err(|e| e.at_step(self.k))?;
             dp.copy_from_slice(&dv);
         }
-        let wrt_parameters = out.columns(2 * N, cols - 2 * N).into_owned();
-        let wrt_initial = out.columns(0, 2 * N).into_owned();
         Ok((wrt_initial, wrt_parameters))
     }
 }
