@@ -78,6 +78,7 @@
 //! stepper → integrator → ensemble; no module imports one that imports it.
 
 mod backend;
+mod buffers;
 pub mod control;
 pub mod doubled;
 pub mod ensemble;

@@ -1,6 +1,7 @@
 //! The dense backend: `N × N` node blocks from the model's node kernels, the step Jacobian
 //! of DESIGN §3 as a dense matrix, factored by LU with partial pivoting ([`crate::Newton`]).
 
+use crate::buffers::{zero_matrix, zero_vector, zeros};
 use nalgebra::{DMatrix, DVector, SVector};
 
 use super::{Layout, StepBackend, StepFailure};
@@ -82,33 +83,33 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
                 vs: vec![zero; r],
                 grads: vec![grad; r],
                 jacs: Vec::with_capacity(r),
-                base: DMatrix::zeros(dim, dim),
+                base: zero_matrix(dim, dim),
                 base_built: false,
                 cons,
-                gval: vec![0.0; cons],
-                gjac: vec![DMatrix::zeros(cons, N); s],
+                gval: zeros(cons),
+                gjac: vec![zero_matrix(cons, N); s],
                 row_scale: vec![1.0; cons],
                 col_scale: vec![1.0; cons],
-                lam: vec![0.0; cons],
+                lam: zeros(cons),
                 blocks_given: false,
                 noise: 0.0,
                 noise_h: 0.0,
-                noise_rows: vec![0.0; N],
+                noise_rows: zeros(N),
                 scale: 0.0,
-                coord_scale: vec![0.0; N],
+                coord_scale: zeros(N),
                 nodes_z: Vec::with_capacity(dim),
                 nodes_valid: false,
             },
             impulse: Vec::new(),
-            mu: vec![0.0; cons],
-            rate: vec![0.0; cons],
+            mu: zeros(cons),
+            rate: zeros(cons),
             newton: Newton::new(dim, newton),
-            z: DVector::zeros(dim),
-            rhs: DVector::zeros(0),
+            z: zero_vector(dim),
+            rhs: zero_vector(0),
             adjoint: None,
             tangent: None,
             carry: false,
-            noise_keep: vec![0.0; N],
+            noise_keep: zeros(N),
             across_steps: false,
         }
     }

@@ -1,6 +1,7 @@
 //! Dense LU with partial pivoting: [`DenseLu`] in buffers made once, for the step Jacobian,
 //! and [`solve_small`] on the stack, for `N × N` blocks.
 
+use crate::buffers::{zero_matrix, zeros};
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use crate::error::NewtonFailure;
@@ -20,9 +21,9 @@ impl DenseLu {
     /// Buffers for `n × n` systems.
     pub fn new(n: usize) -> Self {
         DenseLu {
-            lu: DMatrix::zeros(n, n),
+            lu: zero_matrix(n, n),
             piv: vec![0; n],
-            row_scale: vec![0.0; n],
+            row_scale: zeros(n),
         }
     }
 

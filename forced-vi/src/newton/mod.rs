@@ -17,6 +17,7 @@ mod options;
 #[cfg(test)]
 mod tests;
 
+use crate::buffers::{zero_matrix, zero_vector, zeros};
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::NewtonFailure;
@@ -291,11 +292,11 @@ impl Newton {
     /// A solver for systems of `n` unknowns.
     pub fn new(n: usize, opts: NewtonOptions) -> Self {
         Newton {
-            iteration: Iteration::new(opts, DVector::zeros(n)),
+            iteration: Iteration::new(opts, zero_vector(n)),
             linear: DenseLinear {
                 lu: DenseLu::new(n),
-                jac: DMatrix::zeros(n, n),
-                row_max: vec![0.0; n],
+                jac: zero_matrix(n, n),
+                row_max: zeros(n),
             },
         }
     }

@@ -8,6 +8,7 @@ use super::checks::{
 use super::state::State;
 use super::{RunSetup, Stepper, step_stack_bytes, with_stack};
 use crate::backend::{Backend, StepBackend};
+use crate::buffers::zeros;
 use crate::control::{BAND, Controller, LINEAR_BAND};
 use crate::error::Error;
 use crate::initial::InitialState;
@@ -135,13 +136,13 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             saved: State::empty(),
             energy0: 0.0,
             mass_sign: 1.0,
-            q_end: vec![0.0; N],
-            v_end: vec![0.0; N],
-            dp: vec![0.0; N],
-            basis: vec![0.0; scheme.stages()],
-            extrapolated: vec![0.0; unknowns],
+            q_end: zeros(N),
+            v_end: zeros(N),
+            dp: zeros(N),
+            basis: zeros(scheme.stages()),
+            extrapolated: zeros(unknowns),
             extrapolated_near: false,
-            err: (vec![0.0; 2 * N], vec![0.0; 2 * N]),
+            err: (zeros(2 * N), zeros(2 * N)),
             t: 0.0,
             tolerance,
             controller: Controller::new(scheme.order()),
@@ -153,7 +154,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             lean: false,
             tangent: None,
             tape: None,
-            cforce: vec![0.0; N],
+            cforce: zeros(N),
             stack,
             stats: RunStats::default(),
             stop: None,

@@ -2,6 +2,7 @@
 //! velocity, the predictor's polynomial, with a copy for retries, made in place. Every
 //! vector lives on the heap, made at most once per run (the copy's when first needed),
 //! whatever the model's size.
+use crate::buffers::zeros;
 
 /// One compensated (Kahan) addition of `dx` to `sum`, whose running compensation is `comp`.
 /// Every compensated sum of the crate (DESIGN §3: `q`, `p` and the ledger) goes through it.
@@ -23,8 +24,8 @@ pub(crate) struct KahanVec {
 impl KahanVec {
     fn new(n: usize) -> Self {
         KahanVec {
-            sum: vec![0.0; n],
-            comp: vec![0.0; n],
+            sum: zeros(n),
+            comp: zeros(n),
         }
     }
 
@@ -73,17 +74,17 @@ impl State {
         State {
             q: KahanVec::new(n),
             p: KahanVec::new(n),
-            v: vec![0.0; n],
+            v: zeros(n),
             work: (0.0, 0.0),
-            z_prev: vec![0.0; unknowns],
+            z_prev: zeros(unknowns),
             has_prev: false,
             h_prev: 1.0,
-            pred_delta: vec![0.0; unknowns],
-            pred_delta_prev: vec![0.0; unknowns],
+            pred_delta: zeros(unknowns),
+            pred_delta_prev: zeros(unknowns),
             deltas: 0,
             delta_helps: false,
             scale_f: 0.0,
-            force: vec![0.0; n],
+            force: zeros(n),
             t_state: 0.0,
         }
     }
