@@ -318,7 +318,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         };
         // The parameters' terms take the general kernels' stack unless the per-term kernels
         // give them.
-        let parameters = if super::tangent::per_term_parameters(self.model) {
+        let parameters = if super::linearized::per_term_parameters(self.model) {
             0
         } else {
             general::parameter_stack_bytes::<N>()

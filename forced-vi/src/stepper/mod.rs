@@ -40,6 +40,7 @@ mod adjoint;
 mod advance;
 mod checks;
 pub(crate) use checks::non_finite;
+mod linearized;
 mod predict;
 mod start;
 mod state;
@@ -235,7 +236,7 @@ pub struct Stepper<'a, M, const N: usize> {
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).
-    tangent: Option<Box<tangent::Tangent>>,
+    tangent: Option<Box<linearized::Tangent>>,
     /// A constrained model: the step's multipliers interpolated to the reference's control
     /// points `0 … r − 2` (row `j`: the Lagrange basis of the step's control points there).
     lift_lambda: &'a [f64],

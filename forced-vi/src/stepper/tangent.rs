@@ -18,51 +18,18 @@
 //! solve with those factors and two products with the node blocks. Only accepted steps
 //! (and substeps) enter: the step sequence is held fixed.
 
-use nalgebra::{DMatrix, SVector};
+use nalgebra::DMatrix;
 
+use super::linearized::{
+    Tangent, check_parameter_gradient, linearized_gradients, parameter_gradient,
+    per_term_parameters,
+};
 use super::tangent_constrained::propagate_constrained;
 use super::{Stepper, with_stack};
 use crate::backend::{StepBackend, StepFailure};
 use crate::error::{Error, NewtonFailure};
-use crate::model::{ForcedLagrangian, NodeGradient, general};
+use crate::model::{ForcedLagrangian, general};
 use crate::scalar::all_finite;
-
-/// The tangent `∂(q_k, p_k)/∂(seed)` of a run and its scratch, made once per run.
-pub(crate) struct Tangent {
-    /// Columns of `2N` entries `(dq, dp)`, one after another.
-    pub(crate) m: Vec<f64>,
-    /// The columns before a subdivided step, restored if it fails.
-    saved: Vec<f64>,
-    /// Control-point directions and linearised gradients, `s` blocks of `N`.
-    pub(super) dx: Vec<f64>,
-    pub(super) g: Vec<f64>,
-    /// The right-hand side of a tangent solve, in the backend's layout.
-    pub(super) rhs: Vec<f64>,
-    /// One node's `dx`, `dv`, `d(L_q + F)`, `dL_v`.
-    pub(super) node: [Vec<f64>; 4],
-    /// The parameters' values, and per quadrature node and parameter `θ_k` the derivatives
-    /// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` (`2N` entries) of the step just solved.
-    pub(super) theta: Vec<f64>,
-    pub(super) pnode: Vec<f64>,
-}
-
-impl Tangent {
-    /// The number of columns.
-    pub(crate) fn columns(&self, n: usize) -> usize {
-        self.m.len() / (2 * n)
-    }
-
-    /// Keeps the columns before a subdivided step.
-    pub(crate) fn save(&mut self) {
-        self.saved.clone_from(&self.m);
-    }
-
-    /// Goes back to the columns kept by [`Tangent::save`].
-    pub(crate) fn restore(&mut self) {
-        self.m.clone_from(&self.saved);
-    }
-}
-
 impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// Starts carrying the tangent with respect to the initial data `(q_0, v_0)` and the
     /// parameters `θ`: `2N + P` columns, `dp_0 = C dq_0 + E dv_0 + ∂L_v/∂θ dθ` (DESIGN §12).
@@ -233,100 +200,6 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             dp.copy_from_slice(&dv);
         }
         Ok((wrt_initial, wrt_parameters))
-    }
-}
-
-/// Whether the model's per-term kernels give its parameter derivatives
-/// ([`crate::model::SparseNode::eval_parameter`]), in time linear in its size.
-pub(super) fn per_term_parameters<M: ForcedLagrangian<N>, const N: usize>(model: &M) -> bool {
-    model
-        .sparse_node()
-        .is_some_and(|node| node.has_parameter_kernels())
-}
-
-/// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` at `(t, q, v)`: from the model's per-term kernels where
-/// it has them, else from the general kernels on a stack deep enough for their dual
-/// numbers.
-pub(super) fn parameter_gradient<M: ForcedLagrangian<N>, const N: usize>(
-    model: &M,
-    (t, q, v): (f64, &[f64], &[f64]),
-    theta: &[f64],
-    k: usize,
-) -> NodeGradient<N> {
-    if let Some(node) = model
-        .sparse_node()
-        .filter(|node| node.has_parameter_kernels())
-    {
-        let mut g = NodeGradient::<N> {
-            fq: SVector::zeros(),
-            lv: SVector::zeros(),
-        };
-        let (fq, lv) = (g.fq.as_mut_slice(), g.lv.as_mut_slice());
-        if node.eval_parameter(t, q, v, theta, k, fq, lv) {
-            return g;
-        }
-    }
-    let (q, v) = (SVector::from_column_slice(q), SVector::from_column_slice(v));
-    with_stack(general::parameter_stack_bytes::<N>(), || {
-        general::node_parameter_gradient_at(model, (t, &q, &v), theta, k)
-    })
-}
-
-fn check_parameter_gradient<const N: usize>(g: &NodeGradient<N>, t: f64) -> Result<(), Error> {
-    if all_finite(&g.fq) && all_finite(&g.lv) {
-        Ok(())
-    } else {
-        Err(Error::NonFiniteModel { step: 0, t })
-    }
-}
-
-/// `dG_j`, `j = 0 … s − 1`, for control-point directions `dx_0 = dq`, `dx_m = dq + dZ_m`
-/// given as `dx` (`s` blocks of `N`: block 0 `dq`, block `m ≥ 1` the increment `dZ_m`),
-/// with the node blocks of the last [`StepBackend::linearize`]; with `param = (pnode, k,
-/// P)`, plus the terms of a unit change of parameter `θ_k`.
-///
-/// In increments, as the step's own unknowns: `dx_i = dq + Σ_{m≥1} Φ_im dZ_m` and
-/// `dv_i = (1/h) Σ_{m≥1} Ψ_im dZ_m`, since `Σ_m Φ_im = 1` and `Σ_m Ψ_im = 0`. Summed over
-/// the control points' directions instead, `dv_i` kept the round-off of that zero sum,
-/// `ε |dq| / h`, and the tangent took it into `dp` at every step: on the coupled oscillators
-/// of the tests, 3.6·10⁶ fixed lobatto3 steps ended 3.5e-7 off a reference Jacobian, against
-/// 1e-10 for the adjoint of the same run.
-pub(super) fn linearized_gradients(
-    backend: &dyn StepBackend,
-    h: f64,
-    dx: &[f64],
-    param: Option<(&[f64], usize, usize)>,
-    g: &mut [f64],
-    [dxi, dvi, dfq, dlv]: &mut [Vec<f64>; 4],
-) {
-    let sch = backend.scheme();
-    let (s, n) = (sch.stages(), dxi.len());
-    g.fill(0.0);
-    for i in 0..sch.quadrature_nodes() {
-        dxi.copy_from_slice(&dx[..n]);
-        dvi.fill(0.0);
-        for m in 1..s {
-            let (phi, psi) = (sch.phi_at(i, m), sch.psi_at(i, m) / h);
-            for a in 0..n {
-                dxi[a] += phi * dx[m * n + a];
-                dvi[a] += psi * dx[m * n + a];
-            }
-        }
-        backend.apply_node(i, (dxi, dvi), dfq, dlv);
-        if let Some((pnode, k, np)) = param {
-            let o = (i * np + k) * 2 * n;
-            for a in 0..n {
-                dfq[a] += pnode[o + a];
-                dlv[a] += pnode[o + n + a];
-            }
-        }
-        let bi = sch.b()[i];
-        for j in 0..s {
-            let (cf, cl) = (bi * h * sch.phi_at(i, j), bi * sch.psi_at(i, j));
-            for a in 0..n {
-                g[j * n + a] += cf * dfq[a] + cl * dlv[a];
-            }
-        }
     }
 }
 

@@ -28,7 +28,7 @@
 use nalgebra::{DMatrix, DVector, SVector};
 
 use super::Stepper;
-use super::tangent::{Tangent, linearized_gradients, parameter_gradient};
+use super::linearized::{Tangent, linearized_gradients, parameter_gradient};
 use crate::backend::{SparseConstraintTerms, StepBackend, StepFailure};
 use crate::error::NewtonFailure;
 use crate::model::ForcedLagrangian;

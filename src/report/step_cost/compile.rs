@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use std::fmt::Write as _;
 
-use super::rows::CompileTimes;
 use crate::report::timing::median;
 
 /// The models of the compile-time crates, as `#[forced_lagrangian]` items.
@@ -123,6 +122,15 @@ pub(super) fn throwaway_crate(name: &str) -> Result<(PathBuf, PathBuf), String> 
             .map_err(|e| e.to_string())?;
     }
     Ok((dir, base.join("target")))
+}
+
+/// Build times of the one-model and ten-model crates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompileTimes {
+    /// Seconds to rebuild the crate with one model (median of the repeats).
+    pub one: f64,
+    /// Seconds to rebuild the crate with ten models.
+    pub ten: f64,
 }
 
 /// Builds a one-model and a ten-model crate under `target/step_cost_compile/` (dependencies

@@ -51,8 +51,9 @@ pub mod scaling;
 mod scaling_section;
 mod section;
 
+pub use compile::CompileTimes;
 pub use measure::{peak_rss_kib, SCHEMES};
-pub use rows::{AllocCounter, CompileTimes, Memory, Row, StepCostRecord, Summary};
+pub use rows::{AllocCounter, Memory, Row, StepCostRecord, Summary};
 
 /// The section name in `report/sections/`.
 pub const SECTION: &str = "step_cost";

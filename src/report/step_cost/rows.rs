@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::compile::CompileTimes;
 use crate::report::table::sci;
 
 pub use crate::report::command::AllocCounter;
@@ -37,15 +38,6 @@ impl Row {
     pub fn ratio(&self) -> Option<f64> {
         Some(self.generated? / self.handwritten?)
     }
-}
-
-/// Build times of the one-model and ten-model crates.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CompileTimes {
-    /// Seconds to rebuild the crate with one model (median of the repeats).
-    pub one: f64,
-    /// Seconds to rebuild the crate with ten models.
-    pub ten: f64,
 }
 
 /// Peak RSS readings of the streamed run.
