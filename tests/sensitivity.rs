@@ -9,7 +9,7 @@ use forced_vi::{
     ForcedLagrangian, InitialState, Integrator, LinearPath, NewtonOptions, Scalar, Scheme,
     Sensitivities,
 };
-use forced_vi_models::large::FpuChain;
+use forced_vi_models::large::{FpuChain, Lattice2d};
 use forced_vi_models::models::{
     CoupledVanDerPol, DampedOscillator, DoublePendulumFriction, DrivenDuffing, KapitzaPendulum,
     KeplerDrag, SpringChain,
@@ -274,6 +274,39 @@ fn sensitivity_sparse_backend_matches_dense() {
     let fd = central_differences(&integ, (q0, v0), 3.0, 1e-5);
     let rel = relative(&s.wrt_initial, &fd);
     assert!(rel < 1e-6, "{rel:.2e}");
+    // The macro's chain with its 4 parameters: 30 columns, which the sparse backend carries
+    // 8 at a time (the last block part empty), against the dense backend's one by one.
+    const M: usize = 13;
+    let chain = SpringChain::<M>::FPU;
+    let init = FpuChain::<M>::initial();
+    let run = |path| {
+        Integrator::new(&chain, Scheme::lobatto(3).expect("scheme"), 0.05)
+            .expect("integrator")
+            .linear_path(path)
+            .solve(init, 1.0, output::Tangents)
+            .expect("run")
+    };
+    let (dense, sparse) = (run(LinearPath::Dense), run(LinearPath::Sparse));
+    assert_eq!(sparse.wrt_parameters.ncols(), 4);
+    let rel = relative(&sparse.wrt_initial, &dense.wrt_initial);
+    let rel_p = relative(&sparse.wrt_parameters, &dense.wrt_parameters);
+    eprintln!("spring_chain {M}: sparse vs dense {rel:.2e}, parameters {rel_p:.2e}");
+    assert!(rel < 1e-10 && rel_p < 1e-10, "{rel:.2e} {rel_p:.2e}");
+    // An 8 × 8 membrane, whose LU has supernodes of 8 columns and more (solved through faer's
+    // dense kernels, a column of the block at a time).
+    let membrane = Lattice2d::<8, 64>::default();
+    let init = Lattice2d::<8, 64>::initial();
+    let run = |path| {
+        Integrator::new(&membrane, Scheme::lobatto(3).expect("scheme"), 0.05)
+            .expect("integrator")
+            .linear_path(path)
+            .solve(init, 0.15, output::Tangents)
+            .expect("run")
+    };
+    let (dense, sparse) = (run(LinearPath::Dense), run(LinearPath::Sparse));
+    let rel = relative(&sparse.wrt_initial, &dense.wrt_initial);
+    eprintln!("lattice_2d 64: sparse vs dense {rel:.2e}");
+    assert!(rel < 1e-10, "{rel:.2e}");
 }
 
 #[test]

@@ -125,6 +125,10 @@ impl StepFailure {
     }
 }
 
+/// The directions the forward sensitivities carry through a step at once, where the
+/// backend takes them so ([`StepBackend::tangent_blocks`]).
+pub(crate) const TANGENT_BLOCK: usize = 8;
+
 /// The linear algebra of a step. Slices of positions, velocities and momenta have the
 /// model's `N` entries.
 pub(crate) trait StepBackend {
@@ -177,6 +181,54 @@ pub(crate) trait StepBackend {
     /// (simplified Newton across steps; see the dense backend's `solve`). The sparse
     /// backend always does, its LU being most of a step's cost.
     fn factors_across_steps(&mut self, on: bool);
+    /// Whether [`Self::apply_node_block`] and [`Self::solve_linearized_block`] take
+    /// [`TANGENT_BLOCK`] directions at once (the sparse backend); otherwise the tangent goes
+    /// column by column.
+    fn tangent_blocks(&self) -> bool {
+        false
+    }
+    /// [`Self::apply_node`] for [`TANGENT_BLOCK`] directions, interleaved: entry `a` of
+    /// direction `b` at `a * TANGENT_BLOCK + b`, in every slice. The same results as one
+    /// call each.
+    fn apply_node_block(&self, i: usize, d: (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
+        let (dx, dv) = d;
+        let n = dfq.len() / TANGENT_BLOCK;
+        let mut one = [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for b in 0..TANGENT_BLOCK {
+            let [x, v, f, l] = &mut one;
+            let lane = |from: &[f64], to: &mut [f64]| {
+                for (t, y) in to
+                    .iter_mut()
+                    .zip(from.iter().skip(b).step_by(TANGENT_BLOCK))
+                {
+                    *t = *y;
+                }
+            };
+            lane(dx, x);
+            lane(dv, v);
+            self.apply_node(i, (x, v), f, l);
+            for (out, from) in [(&mut *dfq, &*f), (&mut *dlv, &*l)] {
+                for (t, y) in out.iter_mut().skip(b).step_by(TANGENT_BLOCK).zip(from) {
+                    *t = *y;
+                }
+            }
+        }
+    }
+    /// [`Self::solve_linearized`] for [`TANGENT_BLOCK`] right-hand sides, interleaved as in
+    /// [`Self::apply_node_block`].
+    fn solve_linearized_block(&mut self, x: &mut [f64]) {
+        let n = x.len() / TANGENT_BLOCK;
+        let mut one = vec![0.0; n];
+        for b in 0..TANGENT_BLOCK {
+            for (t, y) in one.iter_mut().zip(x.iter().skip(b).step_by(TANGENT_BLOCK)) {
+                *t = *y;
+            }
+            self.solve_linearized(&mut one);
+            for (t, y) in x.iter_mut().skip(b).step_by(TANGENT_BLOCK).zip(&one) {
+                *t = *y;
+            }
+        }
+    }
     /// `L_q + F` at quadrature node `i` of the last residual evaluation.
     fn node_fq(&self, i: usize) -> &[f64];
     /// The position at quadrature node `i`.
@@ -549,6 +601,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepBackend for Backend<'_, M, N> {
     #[inline(always)]
     fn apply_node(&self, i: usize, d: (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
         forward!(self, b => b.apply_node(i, d, dfq, dlv))
+    }
+    fn tangent_blocks(&self) -> bool {
+        forward!(self, b => b.tangent_blocks())
+    }
+    fn apply_node_block(&self, i: usize, d: (&[f64], &[f64]), dfq: &mut [f64], dlv: &mut [f64]) {
+        forward!(self, b => b.apply_node_block(i, d, dfq, dlv))
+    }
+    fn solve_linearized_block(&mut self, x: &mut [f64]) {
+        forward!(self, b => b.solve_linearized_block(x))
     }
     #[inline(always)]
     fn solve_linearized(&mut self, x: &mut [f64]) {

@@ -2,7 +2,7 @@
 //! Jacobian on the pattern they induce, factored by faer's sparse LU with the symbolic
 //! analysis and the workspace made once per run.
 
-use super::{Layout, StepBackend, StepFailure};
+use super::{Layout, StepBackend, StepFailure, TANGENT_BLOCK};
 use crate::error::Error;
 use crate::error::NewtonFailure;
 use crate::model::{NodePattern, NodeSink};
@@ -361,6 +361,48 @@ impl StepBackend for SparseBackend<'_> {
     fn solve_linearized(&mut self, b: &mut [f64]) {
         match self.tangent.as_mut() {
             Some(t) => t.solve_factored(b),
+            None => b.fill(f64::NAN),
+        }
+    }
+
+    fn tangent_blocks(&self) -> bool {
+        true
+    }
+
+    fn apply_node_block(
+        &self,
+        i: usize,
+        (dx, dv): (&[f64], &[f64]),
+        dfq: &mut [f64],
+        dlv: &mut [f64],
+    ) {
+        let Some(blk) = self.prob.blocks.get(i) else {
+            dfq.fill(f64::NAN);
+            dlv.fill(f64::NAN);
+            return;
+        };
+        dfq.fill(0.0);
+        dlv.fill(0.0);
+        // Each direction's entries take the operations of `apply_node`, in its order.
+        let (dx, _) = dx.as_chunks::<TANGENT_BLOCK>();
+        let (dv, _) = dv.as_chunks::<TANGENT_BLOCK>();
+        let (dfq, _) = dfq.as_chunks_mut::<TANGENT_BLOCK>();
+        let (dlv, _) = dlv.as_chunks_mut::<TANGENT_BLOCK>();
+        for (k, (r, c)) in self.prob.pattern.entries().enumerate() {
+            let (a, b, cc, e) = (blk.a[k], blk.b[k], blk.c[k], blk.e[k]);
+            let (x, v) = (&dx[c], &dv[c]);
+            for ((f, &x), &v) in dfq[r].iter_mut().zip(x).zip(v) {
+                *f += a * x + b * v;
+            }
+            for ((l, &x), &v) in dlv[r].iter_mut().zip(x).zip(v) {
+                *l += cc * x + e * v;
+            }
+        }
+    }
+
+    fn solve_linearized_block(&mut self, b: &mut [f64]) {
+        match self.tangent.as_mut() {
+            Some(t) => t.solve_factored_block(b),
             None => b.fill(f64::NAN),
         }
     }

@@ -304,6 +304,35 @@ impl SparseLu {
             _ => x.iter_mut().for_each(|v| *v = f64::NAN),
         }
     }
+
+    /// [`Self::solve_in_place`] for [`super::supernodal::BLOCK`] right-hand sides,
+    /// interleaved (entry `i` of right-hand side `b` at `x[i * BLOCK + b]`); the same results
+    /// as one solve each.
+    pub(crate) fn solve_block_in_place(&mut self, x: &mut [f64]) {
+        use super::supernodal::BLOCK;
+        if x.len() != self.n * BLOCK {
+            x.iter_mut().for_each(|v| *v = f64::NAN);
+            return;
+        }
+        match (self.factors, &mut self.supernodal, &mut self.general) {
+            (Factors::Supernodal, Some(sn), _) => sn.solve_block_in_place(x),
+            (Factors::General, _, Some(general)) => {
+                // One column at a time, through the probe's scratch.
+                let col = &mut self.probe;
+                col.resize(self.n, 0.0);
+                for b in 0..BLOCK {
+                    for (c, v) in col.iter_mut().zip(x.iter().skip(b).step_by(BLOCK)) {
+                        *c = *v;
+                    }
+                    general.solve_in_place(col);
+                    for (v, c) in x.iter_mut().skip(b).step_by(BLOCK).zip(col.iter()) {
+                        *v = *c;
+                    }
+                }
+            }
+            _ => x.iter_mut().for_each(|v| *v = f64::NAN),
+        }
+    }
 }
 
 /// faer's sparse LU with partial pivoting (column order by COLAMD, structure found as it

@@ -159,6 +159,12 @@ impl SparseNewton {
         self.lu.solve_in_place(b);
     }
 
+    /// [`Self::solve_factored`] for a block of interleaved right-hand sides (see
+    /// [`SparseLu::solve_block_in_place`]).
+    pub(crate) fn solve_factored_block(&mut self, b: &mut [f64]) {
+        self.lu.solve_block_in_place(b);
+    }
+
     /// Solves `R(z) = 0` from the guess in `z`; see [`crate::Newton::solve`] for the tests
     /// and the bound an `Ok` iterate meets.
     pub(crate) fn solve<S: SparseSystem>(

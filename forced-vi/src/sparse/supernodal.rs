@@ -29,6 +29,9 @@ use faer::{Accum, MatMut, MatRef, Par, Side};
 /// supernodes are smaller, the same; at 4 the chain's took 3 to 10 % more.
 const DENSE_KERNELS: usize = 8;
 
+/// The right-hand sides of [`Supernodal::solve_block_in_place`].
+pub(crate) const BLOCK: usize = crate::backend::TANGENT_BLOCK;
+
 const RELAX: &[(usize, f64)] = &[(4, 1.0), (16, 0.2), (48, 0.05)];
 
 /// The supernodal LU of `B = P A Pᵀ` (`B[i, j] = A[perm[i], perm[j]]`) on a fixed structure.
@@ -62,6 +65,9 @@ pub(crate) struct Supernodal {
     tmp: Vec<f64>,
     /// Scratch of a solve: the rows below a supernode (their share, or their values).
     below: Vec<f64>,
+    /// [`Supernodal::solve_block_in_place`]'s `y`, `tmp` and `below` for [`BLOCK`] right-hand
+    /// sides, made on its first call.
+    block: Vec<f64>,
     /// Scratch of faer's dense LU.
     mem: MemBuffer,
 }
@@ -244,6 +250,7 @@ impl Supernodal {
             y: vec![0.0; n],
             tmp: vec![0.0; max_ns],
             below: vec![0.0; max_nr],
+            block: Vec::new(),
             mem,
         })
     }
@@ -450,6 +457,159 @@ impl Supernodal {
         }
         for (&yi, &p) in y.iter().zip(&self.perm) {
             x[p] = yi;
+        }
+    }
+
+    /// Solves with the last factors for [`BLOCK`] right-hand sides at once, interleaved:
+    /// entry `i` of right-hand side `b` at `x[i * BLOCK + b]`. Each right-hand side goes
+    /// through the same operations, in the same order, as in [`Self::solve_in_place`] (so
+    /// the results are the same to the bit); on the small supernodes' loops the `BLOCK`
+    /// of them share each factor entry's load.
+    pub(crate) fn solve_block_in_place(&mut self, x: &mut [f64]) {
+        let n = self.perm.len();
+        let max_ns = self.tmp.len();
+        let max_nr = self.below.len();
+        let need = (n + max_ns + max_nr) * BLOCK;
+        if self.block.len() < need {
+            self.block.resize(need, 0.0);
+        }
+        let (y, rest) = self.block.split_at_mut(n * BLOCK);
+        let (tmp, below) = rest.split_at_mut(max_ns * BLOCK);
+        let (y, _) = y.as_chunks_mut::<BLOCK>();
+        let (tmp, _) = tmp.as_chunks_mut::<BLOCK>();
+        let (below, _) = below.as_chunks_mut::<BLOCK>();
+        let (xs, _) = x.as_chunks_mut::<BLOCK>();
+        for (yi, &p) in y.iter_mut().zip(&self.perm) {
+            *yi = xs[p];
+        }
+        let n_super = self.begin.len() - 1;
+        // One column at a time through faer's kernels, for a large supernode: its entries
+        // gathered into `self.tmp` and `self.below`, as the single solve has them.
+        let column = |y: &[[f64; BLOCK]], b: usize, out: &mut [f64]| {
+            for (o, yi) in out.iter_mut().zip(y) {
+                *o = yi[b];
+            }
+        };
+        for s in 0..n_super {
+            let (c0, c1) = (self.begin[s], self.begin[s + 1]);
+            let ns = c1 - c0;
+            let rows_s = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+            let nr = rows_s.len();
+            let storage = &self.val[self.val_ptr[s]..self.val_ptr[s + 1]];
+            let (panel, l21) = storage.split_at(ns * (ns + nr));
+            if ns >= DENSE_KERNELS {
+                for b in 0..BLOCK {
+                    let t1 = &mut self.tmp[..ns];
+                    for (t, &p) in t1.iter_mut().zip(&self.piv[c0..c1]) {
+                        *t = y[c0 + p][b];
+                    }
+                    let l11 = MatRef::from_column_major_slice(&panel[..ns * ns], ns, ns);
+                    let t = MatMut::from_column_major_slice_mut(&mut *t1, ns, 1);
+                    solve_unit_lower_triangular_in_place(l11, t, Par::Seq);
+                    for (yi, &t) in y[c0..c1].iter_mut().zip(t1.iter()) {
+                        yi[b] = t;
+                    }
+                    if nr > 0 {
+                        let w = &mut self.below[..nr];
+                        matmul(
+                            MatMut::from_column_major_slice_mut(w, nr, 1),
+                            Accum::Replace,
+                            MatRef::from_column_major_slice(l21, nr, ns),
+                            MatRef::from_column_major_slice(&self.tmp[..ns], ns, 1),
+                            1.0,
+                            Par::Seq,
+                        );
+                        for (&r, &x) in rows_s.iter().zip(w.iter()) {
+                            y[r][b] -= x;
+                        }
+                    }
+                }
+                continue;
+            }
+            let tmp = &mut tmp[..ns];
+            for (t, &p) in tmp.iter_mut().zip(&self.piv[c0..c1]) {
+                *t = y[c0 + p];
+            }
+            for k in 0..ns {
+                let yk = tmp[k];
+                let col = &panel[k * ns + k + 1..(k + 1) * ns];
+                for (t, &l) in tmp[k + 1..].iter_mut().zip(col) {
+                    for (tb, yb) in t.iter_mut().zip(yk) {
+                        *tb -= l * yb;
+                    }
+                }
+            }
+            y[c0..c1].copy_from_slice(tmp);
+            for (yk, l21k) in tmp.iter().zip(l21.chunks_exact(nr.max(1))) {
+                for (&r, &l) in rows_s.iter().zip(l21k) {
+                    for (rb, yb) in y[r].iter_mut().zip(yk) {
+                        *rb -= l * yb;
+                    }
+                }
+            }
+        }
+        for s in (0..n_super).rev() {
+            let (c0, c1) = (self.begin[s], self.begin[s + 1]);
+            let ns = c1 - c0;
+            let rows_s = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+            let nr = rows_s.len();
+            let panel = &self.val[self.val_ptr[s]..self.val_ptr[s] + ns * (ns + nr)];
+            if ns >= DENSE_KERNELS {
+                for b in 0..BLOCK {
+                    let ys = &mut self.tmp[..ns];
+                    column(&y[c0..c1], b, ys);
+                    if nr > 0 {
+                        let g = &mut self.below[..nr];
+                        for (gi, &r) in g.iter_mut().zip(rows_s) {
+                            *gi = y[r][b];
+                        }
+                        matmul(
+                            MatMut::from_column_major_slice_mut(&mut *ys, ns, 1),
+                            Accum::Add,
+                            MatRef::from_column_major_slice(&panel[ns * ns..], ns, nr),
+                            MatRef::from_column_major_slice(&*g, nr, 1),
+                            -1.0,
+                            Par::Seq,
+                        );
+                    }
+                    let u11 = MatRef::from_column_major_slice(&panel[..ns * ns], ns, ns);
+                    solve_upper_triangular_in_place(
+                        u11,
+                        MatMut::from_column_major_slice_mut(&mut *ys, ns, 1),
+                        Par::Seq,
+                    );
+                    for (yi, &v) in y[c0..c1].iter_mut().zip(ys.iter()) {
+                        yi[b] = v;
+                    }
+                }
+                continue;
+            }
+            let g = &mut below[..nr];
+            for (gi, &r) in g.iter_mut().zip(rows_s) {
+                *gi = y[r];
+            }
+            let ys = &mut y[c0..c1];
+            for (yr, u12) in g.iter().zip(panel[ns * ns..].chunks_exact(ns)) {
+                for (yi, &u) in ys.iter_mut().zip(u12) {
+                    for (ib, rb) in yi.iter_mut().zip(yr) {
+                        *ib -= u * rb;
+                    }
+                }
+            }
+            for k in (0..ns).rev() {
+                let col = &panel[k * ns..k * ns + k + 1];
+                let d = col[k];
+                ys[k].iter_mut().for_each(|v| *v /= d);
+                let yk = ys[k];
+                for (yi, &u) in ys[..k].iter_mut().zip(col) {
+                    for (ib, kb) in yi.iter_mut().zip(yk) {
+                        *ib -= u * kb;
+                    }
+                }
+            }
+        }
+        for (yi, &p) in y.iter().zip(&self.perm) {
+            xs[p] = *yi;
         }
     }
 }

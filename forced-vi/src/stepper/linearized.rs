@@ -5,7 +5,7 @@
 use nalgebra::SVector;
 
 use super::with_stack;
-use crate::backend::StepBackend;
+use crate::backend::{StepBackend, TANGENT_BLOCK};
 use crate::error::Error;
 use crate::model::{ForcedLagrangian, NodeGradient, general};
 use crate::scalar::all_finite;
@@ -27,6 +27,10 @@ pub(crate) struct Tangent {
     /// `∂(L_q + F)/∂θ_k`, `∂L_v/∂θ_k` (`2N` entries) of the step just solved.
     pub(super) theta: Vec<f64>,
     pub(super) pnode: Vec<f64>,
+    /// Where the backend takes [`TANGENT_BLOCK`] columns at once: their `dx`, `g` and
+    /// right-hand sides, and their node buffers, interleaved (empty otherwise).
+    pub(super) block: [Vec<f64>; 3],
+    pub(super) block_node: [Vec<f64>; 4],
 }
 
 impl Tangent {
@@ -138,6 +142,67 @@ pub(super) fn linearized_gradients(
             let (cf, cl) = (bi * h * sch.phi_at(i, j), bi * sch.psi_at(i, j));
             for a in 0..n {
                 g[j * n + a] += cf * dfq[a] + cl * dlv[a];
+            }
+        }
+    }
+}
+
+/// [`linearized_gradients`] for [`TANGENT_BLOCK`] directions at once, interleaved (entry `e`
+/// of direction `b` at `e * TANGENT_BLOCK + b` in `dx`, `g` and `node`'s buffers, which
+/// hold `TANGENT_BLOCK` times the entries); `params[b]` is the parameter whose unit change
+/// direction `b` carries, if any, with `(pnode, P)`. Each direction takes the operations
+/// of [`linearized_gradients`], in its order: the same results to the bit.
+pub(super) fn linearized_gradients_block(
+    backend: &dyn StepBackend,
+    h: f64,
+    dx: &[f64],
+    (params, pnode, np): ([Option<usize>; TANGENT_BLOCK], &[f64], usize),
+    g: &mut [f64],
+    [dxi, dvi, dfq, dlv]: &mut [Vec<f64>; 4],
+) {
+    const B: usize = TANGENT_BLOCK;
+    let sch = backend.scheme();
+    let s = sch.stages();
+    let n = dxi.len() / B;
+    g.fill(0.0);
+    let (dxc, _) = dx.as_chunks::<B>();
+    for i in 0..sch.quadrature_nodes() {
+        dxi.copy_from_slice(&dx[..n * B]);
+        dvi.fill(0.0);
+        {
+            let (xi, _) = dxi.as_chunks_mut::<B>();
+            let (vi, _) = dvi.as_chunks_mut::<B>();
+            for m in 1..s {
+                let (phi, psi) = (sch.phi_at(i, m), sch.psi_at(i, m) / h);
+                let dm = &dxc[m * n..(m + 1) * n];
+                for ((x, v), d) in xi.iter_mut().zip(vi.iter_mut()).zip(dm) {
+                    for b in 0..B {
+                        x[b] += phi * d[b];
+                        v[b] += psi * d[b];
+                    }
+                }
+            }
+        }
+        backend.apply_node_block(i, (dxi, dvi), dfq, dlv);
+        let (fq, _) = dfq.as_chunks_mut::<B>();
+        let (lv, _) = dlv.as_chunks_mut::<B>();
+        for (b, k) in params.iter().enumerate() {
+            if let Some(k) = *k {
+                let o = (i * np + k) * 2 * n;
+                for a in 0..n {
+                    fq[a][b] += pnode[o + a];
+                    lv[a][b] += pnode[o + n + a];
+                }
+            }
+        }
+        let bi = sch.b()[i];
+        let (gc, _) = g.as_chunks_mut::<B>();
+        for j in 0..s {
+            let (cf, cl) = (bi * h * sch.phi_at(i, j), bi * sch.psi_at(i, j));
+            for ((gj, f), l) in gc[j * n..(j + 1) * n].iter_mut().zip(&*fq).zip(&*lv) {
+                for b in 0..B {
+                    gj[b] += cf * f[b] + cl * l[b];
+                }
             }
         }
     }
