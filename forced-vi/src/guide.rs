@@ -427,7 +427,10 @@
 //! and `∂(q_T, v_T)/∂θ` for the struct's fields `θ`, in field order; for a scalar loss of
 //! the final state, [`output::adjoint`](crate::output::adjoint) gives its gradient by the discrete
 //! adjoint at the cost of about one more run (DESIGN §12). Both are exact derivatives of
-//! the discrete flow (the factored step Jacobian, no finite differences). The attribute
+//! the discrete flow (the factored step Jacobian, no finite differences). The forward
+//! sensitivities carry a `2N × (2N + P)` matrix and are refused past
+//! [`MAX_TANGENT_BYTES`](crate::MAX_TANGENT_BYTES) with [`Error::TangentTooLarge`]; the
+//! adjoint runs at every size. The attribute
 //! generates [`ForcedLagrangian::lagrangian_with`] and [`ForcedLagrangian::force_with`],
 //! the model with its fields as dual numbers; a model written by hand declares no
 //! parameters unless it overrides them and [`ForcedLagrangian::parameter_names`].
