@@ -139,6 +139,11 @@ pub trait Scene: Send + Sync {
     /// unit step add up to a final error of about `δ` times this. From
     /// [`forced_vi::output::Tangents`] (lobatto4, `steps` steps over the run).
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError>;
+    /// How much of its error budget an adaptive run of member 0 at `rtol = atol = tol`
+    /// spends: the mean over its accepted steps of the estimate per unit step
+    /// ([`forced_vi::StepRecord::error_estimate`] times `T / h`), which the controller
+    /// keeps at most 1 and steers to its steady error (0.25 and above).
+    fn mean_estimate(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError>;
     /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
     fn balance_variational(
         &self,
@@ -393,6 +398,27 @@ where
             restarted.push(tb);
         }
         Ok((timing::median(&mut new), timing::median(&mut restarted)))
+    }
+    fn mean_estimate(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError> {
+        let (q0, v0) = self.start(0)?;
+        let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
+        let span = self.t_final;
+        let (mut sum, mut steps, mut t_prev) = (0.0, 0usize, 0.0);
+        integ
+            .solve(
+                InitialState::from_velocity(q0, v0),
+                span,
+                output::each_step(|r| {
+                    let h = r.t - t_prev;
+                    t_prev = r.t;
+                    if h > 0.0 {
+                        sum += r.error_estimate * span / h;
+                        steps += 1;
+                    }
+                }),
+            )
+            .map_err(|f| f.error)?;
+        Ok(sum / steps.max(1) as f64)
     }
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError> {
         // A constrained map's tangent is singular off the constraints (it takes every

@@ -305,6 +305,9 @@ struct Proportionality {
     steps: (usize, usize),
     /// The scene's amplification ([`Scene::amplification`]), if it could be measured.
     amplification: Option<f64>,
+    /// The middle fitted run's tolerance and the mean of its steps' estimates per unit
+    /// step ([`Scene::mean_estimate`]), if it could be measured.
+    budget: Option<(f64, f64)>,
 }
 
 /// The fewest steps of a run whose error counts in the tolerance-proportionality slope.
@@ -336,6 +339,17 @@ fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec
                 .filter(|r| r.member_steps_min >= MIN_RUN_STEPS)
                 .map(|r| (r.h_or_tol, r.errors()[0]))
                 .collect();
+            // The budget the controller spends, on the middle fitted run by tolerance (or
+            // the middle run, with none fitted).
+            let middle = if pts.is_empty() {
+                rows.get(rows.len() / 2).map(|r| r.h_or_tol)
+            } else {
+                pts.get(pts.len() / 2).map(|&(tol, _)| tol)
+            };
+            let budget = middle.and_then(|tol| {
+                let scheme = m.scheme()?;
+                s.mean_estimate(&scheme, tol).ok().map(|mean| (tol, mean))
+            });
             out.push(Proportionality {
                 scene: s.name(),
                 method: *m,
@@ -352,6 +366,7 @@ fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec
                     .fold(f64::NAN, f64::min),
                 steps: (rows[rows.len() - 1].steps, rows[0].steps),
                 amplification: amplification.flatten(),
+                budget,
             });
         }
     }
@@ -382,8 +397,11 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
          over its tolerance (target ≤ 10). The controller bounds the local error per unit step; the final error is \
          those local errors carried to T by the flow, so it is about tol times the flow's amplification A: the mean over \
          {} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
-         (`output::Tangents`, lobatto4 at {} steps, member 0 of the ensemble). The last column divides by it: \
-         on a chaotic scene, where A is large, it is the calibration that is left.\n\n",
+         (`output::Tangents`, lobatto4 at {} steps, member 0 of the ensemble). The next column divides by it: \
+         on a chaotic scene, where A is large, it is the calibration that is left. Budget spent: the mean over the \
+         accepted steps of the estimate per unit step (at most 1; the controller steers it to its steady error, \
+         0.25 and above), on the middle fitted run by tolerance (member 0), with that tolerance in brackets: \
+         near its steady error, a run makes the local errors its tolerance allows.\n\n",
         tols.join(", "),
         plan.amplification_points,
         plan.amplification_steps,
@@ -409,6 +427,10 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
                 p.amplification
                     .map_or("–".into(), |a| format!("{:.2}", p.worst_ratio / a))
             }),
+            col("budget spent (tol)", |p: &Proportionality| {
+                p.budget
+                    .map_or("–".into(), |(tol, mean)| format!("{mean:.2} ({tol:.0e})"))
+            }),
             col("steps (loosest → tightest)", |p: &Proportionality| {
                 format!("{} → {}", p.steps.0, p.steps.1)
             }),
@@ -421,6 +443,10 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
 /// The amplification at and above which a scene counts as amplifying errors strongly (the
 /// chaotic scenes), for the calibration sentence under the proportionality table.
 const STRONG_AMPLIFICATION: f64 = 100.0;
+
+/// The mean estimate per unit step at and above which a run counts as spending its error
+/// budget (the controller's steady error is 0.25 and above).
+const SPENT: f64 = 0.2;
 
 /// Issue 23's target for the chaotic scenes, measured: every fitted run's err/(tol·A)
 /// within 0.1–10, per scheme, on each scene whose amplification is at least
@@ -463,11 +489,46 @@ fn amplified_calibration(lines: &[Proportionality]) -> String {
                 )
             })
             .collect();
+        // Of the schemes that miss the target, those whose middle run spends its budget
+        // and those whose run does not.
+        let short: Vec<&&Proportionality> = rows.iter().filter(|p| !within(p)).collect();
+        let name_spent = |p: &&&Proportionality| {
+            p.budget
+                .map(|(_, mean)| format!("`{}` {mean:.2}", p.method))
+        };
+        let full: Vec<String> = short
+            .iter()
+            .filter(|p| p.budget.is_some_and(|b| b.1 >= SPENT))
+            .filter_map(name_spent)
+            .collect();
+        let less: Vec<String> = short
+            .iter()
+            .filter(|p| p.budget.is_some_and(|b| b.1 < SPENT))
+            .filter_map(name_spent)
+            .collect();
+        let mut spent = String::new();
+        if !full.is_empty() {
+            spent.push_str(&format!(
+                " Of those, {} spend their budget (the mean estimate per unit step of the \
+                 middle run, at or near the controller's steady error): their local errors are \
+                 as large as the tolerance allows, and the flow carried them to T with less \
+                 than a tenth of A's growth (along directions it amplifies less, or with signs \
+                 that cancel), not the controller holding them smaller.",
+                full.join(", ")
+            ));
+        }
+        if !less.is_empty() {
+            spent.push_str(&format!(
+                " {} spend less (below {SPENT}): their local errors were smaller than the \
+                 tolerance allows, which lowers the ratio too.",
+                less.join(", ")
+            ));
+        }
         md.push_str(&format!(
             "\nOn `{scene}` (A = {a:.0}), every fitted run's err/(tol·A) is within 0.1–10 (issue \
              23's target) for {} of {} schemes{}{}. A is the growth of a perturbation in its worst \
              direction (the ∞-norm of the map's q rows, averaged over t); below 0.1, a run's \
-             local errors grew by less than a tenth of that.\n",
+             local errors grew by less than a tenth of that.{spent}\n",
             met.len(),
             rows.len(),
             if met.is_empty() {
