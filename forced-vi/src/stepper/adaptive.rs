@@ -198,11 +198,15 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                         // steps, now 133). Past half the bound the step is held, as before:
                         // there its readings are noise, and growing on them ended two
                         // constrained pendulums (lobatto3 at 1e-12) at the bound, which the
-                        // held steps end within the tolerance.
-                        let kept = (err >= self.resolution || ratio >= BAND_ROUND_OFF)
-                            && self
-                                .band
-                                .is_some_and(|(lo, hi)| (lo * h..=hi * h).contains(&self.h_next));
+                        // held steps end within the tolerance. A resolved reading is held
+                        // only from the band's share of the steady error on (see
+                        // `crate::control`, "The band, for linear models").
+                        let steady = self.controller.steady();
+                        let kept = self.band.is_some_and(|b| {
+                            let resolved = err >= self.resolution && err >= b.settled * steady;
+                            (resolved || ratio >= BAND_ROUND_OFF)
+                                && (b.lo * h..=b.hi * h).contains(&self.h_next)
+                        });
                         if kept {
                             self.h_next = h;
                         }

@@ -232,7 +232,7 @@ pub struct Stepper<'a, M, const N: usize> {
     /// [`crate::control`]'s step-size bands): a step that the controller would resize by a
     /// factor within the band (`crate::control::BAND` or `LINEAR_BAND`) keeps its size, and
     /// so its factors.
-    band: Option<(f64, f64)>,
+    band: Option<crate::control::Band>,
     /// Final state only: no velocity solve, energy, work or record per step.
     lean: bool,
     /// Sensitivity runs: the tangent of the flow (DESIGN §12).
