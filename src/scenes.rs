@@ -140,10 +140,12 @@ pub trait Scene: Send + Sync {
     /// [`forced_vi::output::Tangents`] (lobatto4, `steps` steps over the run).
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError>;
     /// How much of its error budget an adaptive run of member 0 at `rtol = atol = tol`
-    /// spends: the mean over its accepted steps of the estimate per unit step
-    /// ([`forced_vi::StepRecord::error_estimate`] times `T / h`), which the controller
-    /// keeps at most 1 and steers to its steady error (0.25 and above).
-    fn mean_estimate(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError>;
+    /// spends: the sum over its accepted steps of their estimated local errors
+    /// ([`forced_vi::StepRecord::error_estimate`], in units of the tolerance), the mean of
+    /// the estimates per unit step weighted by the steps' lengths. The controller keeps
+    /// each step's share at most `h / T`, so the sum at most 1, and steers it to its steady
+    /// error (0.25 and above).
+    fn budget_spent(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError>;
     /// The energy-balance error of member 0 along a run to `t_final`, about `samples` points.
     fn balance_variational(
         &self,
@@ -399,26 +401,18 @@ where
         }
         Ok((timing::median(&mut new), timing::median(&mut restarted)))
     }
-    fn mean_estimate(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError> {
+    fn budget_spent(&self, scheme: &Scheme, tol: f64) -> Result<f64, SceneError> {
         let (q0, v0) = self.start(0)?;
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
-        let span = self.t_final;
-        let (mut sum, mut steps, mut t_prev) = (0.0, 0usize, 0.0);
+        let mut sum = 0.0;
         integ
             .solve(
                 InitialState::from_velocity(q0, v0),
-                span,
-                output::each_step(|r| {
-                    let h = r.t - t_prev;
-                    t_prev = r.t;
-                    if h > 0.0 {
-                        sum += r.error_estimate * span / h;
-                        steps += 1;
-                    }
-                }),
+                self.t_final,
+                output::each_step(|r| sum += r.error_estimate),
             )
             .map_err(|f| f.error)?;
-        Ok(sum / steps.max(1) as f64)
+        Ok(sum)
     }
     fn amplification(&self, points: usize, steps: usize) -> Result<f64, SceneError> {
         // A constrained map's tangent is singular off the constraints (it takes every

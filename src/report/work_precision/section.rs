@@ -305,8 +305,8 @@ struct Proportionality {
     steps: (usize, usize),
     /// The scene's amplification ([`Scene::amplification`]), if it could be measured.
     amplification: Option<f64>,
-    /// The middle fitted run's tolerance and the mean of its steps' estimates per unit
-    /// step ([`Scene::mean_estimate`]), if it could be measured.
+    /// The middle fitted run's tolerance and the budget it spends
+    /// ([`Scene::budget_spent`]), if it could be measured.
     budget: Option<(f64, f64)>,
 }
 
@@ -348,7 +348,7 @@ fn proportionality(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> Vec
             };
             let budget = middle.and_then(|tol| {
                 let scheme = m.scheme()?;
-                s.mean_estimate(&scheme, tol).ok().map(|mean| (tol, mean))
+                s.budget_spent(&scheme, tol).ok().map(|spent| (tol, spent))
             });
             out.push(Proportionality {
                 scene: s.name(),
@@ -398,10 +398,11 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
          those local errors carried to T by the flow, so it is about tol times the flow's amplification A: the mean over \
          {} times t of ‖Φ_q(T, t)‖∞, the rows in q_T of the tangent map from (q, p) at t to (q, p) at T \
          (`output::Tangents`, lobatto4 at {} steps, member 0 of the ensemble). The next column divides by it: \
-         on a chaotic scene, where A is large, it is the calibration that is left. Budget spent: the mean over the \
-         accepted steps of the estimate per unit step (at most 1; the controller steers it to its steady error, \
-         0.25 and above), on the middle fitted run by tolerance (member 0), with that tolerance in brackets: \
-         near its steady error, a run makes the local errors its tolerance allows.\n\n",
+         on a chaotic scene, where A is large, it is the calibration that is left. Budget spent: the sum of the \
+         accepted steps' estimated local errors in units of the tolerance, the mean of the estimates per unit step \
+         weighted by the steps' lengths (at most 1; the controller steers it to its steady error, 0.25 and above), \
+         on the middle fitted run by tolerance (member 0), with that tolerance in brackets: near its steady error, \
+         a run makes the local errors its tolerance allows.\n\n",
         tols.join(", "),
         plan.amplification_points,
         plan.amplification_steps,
@@ -444,8 +445,8 @@ fn adaptive(plan: &Plan, scenes: &[&dyn Scene], summary: &Summary) -> String {
 /// chaotic scenes), for the calibration sentence under the proportionality table.
 const STRONG_AMPLIFICATION: f64 = 100.0;
 
-/// The mean estimate per unit step at and above which a run counts as spending its error
-/// budget (the controller's steady error is 0.25 and above).
+/// The budget spent ([`Scene::budget_spent`]) at and above which a run counts as spending
+/// its error budget (the controller's steady error is 0.25 and above).
 const SPENT: f64 = 0.2;
 
 /// Issue 23's target for the chaotic scenes, measured: every fitted run's err/(tol·A)
@@ -509,8 +510,9 @@ fn amplified_calibration(lines: &[Proportionality]) -> String {
         let mut spent = String::new();
         if !full.is_empty() {
             spent.push_str(&format!(
-                " Of those, {} spend their budget (the mean estimate per unit step of the \
-                 middle run, at or near the controller's steady error): their local errors are \
+                " Of those, {} spend their budget (the sum of the middle run's estimated \
+                 local errors over its tolerance, at or near the controller's steady error): \
+                 their local errors are \
                  as large as the tolerance allows, and the flow carried them to T with less \
                  than a tenth of A's growth (along directions it amplifies less, or with signs \
                  that cancel), not the controller holding them smaller.",
