@@ -1527,6 +1527,97 @@ fn trust_a_force_that_jumps_is_within_tolerance_or_typed() {
     }
 }
 
+/// The exact motion of [`Coulomb`] from rest at `x0`: half-periods of `π` about `±μ`, each
+/// ending at rest `2c − x` (`c` its centre); `None` once a rest is within `±μ` (the block
+/// would stick, which `signum`, `+1` at zero, does not model).
+fn coulomb_exact(mu: f64, x0: f64, t: f64) -> Option<f64> {
+    use std::f64::consts::PI;
+    let (mut tk, mut xk) = (0.0, x0);
+    loop {
+        if xk.abs() <= mu {
+            return None;
+        }
+        let c = mu.copysign(xk);
+        if t <= tk + PI {
+            return Some(c + (xk - c) * (t - tk).cos());
+        }
+        xk = 2.0 * c - xk;
+        tk += PI;
+    }
+}
+
+/// The class of [`trust_a_force_that_jumps_is_within_tolerance_or_typed`] over more of it:
+/// other frictions and amplitudes, runs over one to three reversals, lobatto2–6 at tol 1e-3
+/// to 1e-12 (lobatto2 to 1e-9). Every run ends `Ok` within 10 times its tolerance or in a
+/// typed error. Measured: 1222 runs, 887 typed errors, no wrong `Ok`. (An estimate made once
+/// over two steps, tried as a cheaper estimate, failed it: 167 wrong `Ok`, up to 3.7e7 times
+/// the tolerance off.)
+#[test]
+fn trust_forces_that_jump_over_several_reversals() {
+    let cases = [
+        (1.0, 3.3),
+        (0.5, 2.0),
+        (0.3, 2.9),
+        (0.7, 4.6),
+        (0.15, 1.1),
+        (1.2, 7.7),
+        (0.4, 3.7),
+    ];
+    let (mut runs, mut wrong) = (0, Vec::new());
+    for (mu, x0) in cases {
+        for t_final in [2.5, 4.0, 5.0, 7.3] {
+            // Not within half a time unit of sticking.
+            let (Some(exact), Some(_)) = (
+                coulomb_exact(mu, x0, t_final),
+                coulomb_exact(mu, x0, t_final + 0.5),
+            ) else {
+                continue;
+            };
+            for s in 2..=6 {
+                for k in 3..=12 {
+                    if s == 2 && k > 9 {
+                        continue;
+                    }
+                    let tol = 10f64.powi(-k);
+                    runs += 1;
+                    let run = Integrator::adaptive(
+                        &Coulomb { mu },
+                        Scheme::lobatto(s).unwrap(),
+                        tol,
+                        tol,
+                    )
+                    .unwrap()
+                    .final_state(InitialState::from_velocity([x0], [0.0]), t_final);
+                    match run {
+                        Ok(end) => {
+                            let err = (end.q[0] - exact).abs();
+                            if err > 10.0 * tol * (1.0 + exact.abs()) {
+                                wrong.push(format!("mu {mu}, x0 {x0}, T {t_final}, lobatto{s} at {tol:e}: {err:e} off"));
+                            }
+                        }
+                        Err(f) => assert!(
+                            matches!(
+                                f.error,
+                                Error::StepSizeTooSmall { .. }
+                                    | Error::NewtonFailed { .. }
+                                    | Error::ToleranceBelowRoundOff { .. }
+                            ),
+                            "mu {mu}, x0 {x0}, lobatto{s} at {tol:e}: {}",
+                            f.error
+                        ),
+                    }
+                }
+            }
+        }
+    }
+    assert!(runs > 1000, "{runs} runs");
+    assert!(
+        wrong.is_empty(),
+        "{} wrong Ok of {runs}: {wrong:#?}",
+        wrong.len()
+    );
+}
+
 /// Coulomb friction regularised, `−μ tanh(ẋ / ε)`. num-dual's `tanh` (`sinh / cosh`) is
 /// NaN from `|ẋ / ε| ≈ 355` on, so with `ε = 10⁻³` every run ended in `NonFiniteModel` at
 /// `|ẋ| = 0.36` (t = 0.154); the macro now takes a bounded form. Reference:

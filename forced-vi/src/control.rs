@@ -136,7 +136,10 @@
 //! end in a typed error at the first reversal, keeping the steps before it: control per
 //! unit step asks a step for an error of `tol · h / T`, but a step across a jump of the
 //! force is off by the jump times the time from its start to the jump, however short the
-//! step, so the steps shrink onto the jump until the floor. Such a force is written
+//! step, so the steps shrink onto the jump until the floor. Over one to three reversals
+//! (seven frictions and amplitudes, `T` up to 7.3, lobatto2–6, tol 1e-3 to 1e-12, 1222
+//! runs), 887 end in a typed error and 335 `Ok` within 10 times the tolerance
+//! (`trust_forces_that_jump_over_several_reversals`). Such a force is written
 //! regularised, `−μ (v / ε).tanh()`: with ε = 10⁻³ and 10⁻⁴, lobatto3 and lobatto5 end
 //! within the tolerance at 1e-6 to 1e-10 (`tests/trust_runtime.rs`, reference
 //! `scripts/coulomb_reference.py`).
