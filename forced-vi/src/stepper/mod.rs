@@ -75,6 +75,9 @@ pub struct StepOptions {
     pub max_step: f64,
     /// Adaptive runs: the smallest step other than the last one (default 0).
     pub min_step: f64,
+    /// Adaptive runs: estimate the local error once over two steps where that is sound
+    /// (default off; see [`Integrator::paired_estimates`](crate::Integrator::paired_estimates)).
+    pub paired_estimates: bool,
 }
 
 impl StepOptions {
@@ -111,6 +114,7 @@ impl Default for StepOptions {
             max_steps: Self::DEFAULT_MAX_STEPS,
             max_step: f64::INFINITY,
             min_step: 0.0,
+            paired_estimates: false,
         }
     }
 }
@@ -240,6 +244,13 @@ pub struct Stepper<'a, M, const N: usize> {
     /// A constrained model: the step's multipliers interpolated to the reference's control
     /// points `0 … r − 2` (row `j`: the Lagrange basis of the step's control points there).
     lift_lambda: &'a [f64],
+    /// Adaptive runs of a model without constraints: the tables of a reference step over
+    /// two steps (`EstimateTables::pair_lift`, `pair_second`; empty otherwise), the first
+    /// step of a pair kept while the second is solved, and an accepted pair's second step,
+    /// handed out at the next call (see [`crate::control`], "Pairs").
+    pair_lift: (&'a [f64], &'a [bool]),
+    pair: Option<Box<adaptive::PairFirst>>,
+    pending: Option<adaptive::Pending>,
     /// A constrained model: the mean constraint force over the last step (DESIGN §11).
     cforce: Vec<f64>,
     /// Adjoint runs: the steps kept for the backward pass (DESIGN §12).

@@ -101,11 +101,21 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         // at the error reference's points: tables of the scheme, made once.
         let (mut lift, mut block_weights, mut lift_lambda): (&[f64], &[f64], &[f64]) =
             (&[], &[], &[]);
+        let mut pair_lift: (&[f64], &[bool]) = (&[], &[]);
         if reference.is_some() {
-            let e = scheme.estimate_tables();
+            // Pairs (see `crate::control`): their reference's tables, also for the steps
+            // taken alone.
+            let paired = setup.options.paired_estimates;
+            let e = match paired {
+                true => scheme.pair_estimate_tables(),
+                false => scheme.estimate_tables(),
+            };
             lift = &e.lift;
             if model.constraint_count() == 0 {
                 block_weights = &e.block_weights;
+                if paired && scheme.stages() <= 4 {
+                    pair_lift = (&e.pair_lift, &e.pair_second);
+                }
             } else {
                 lift_lambda = &e.lift_lambda;
             }
@@ -123,6 +133,9 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             unresolved_step: 0.0,
             resolution: 0.0,
             lift_lambda,
+            pair_lift,
+            pair: None,
+            pending: None,
             options,
             h,
             h_setup: h,
@@ -190,6 +203,10 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             unresolved_step,
             resolution,
             lift_lambda: _,
+            pair_lift: _,
+            // Scratch, filled before it is read.
+            pair: _,
+            pending,
             options,
             h: step,
             h_setup: _,
@@ -227,6 +244,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             started,
             done,
         } = self;
+        *pending = None;
         *round_off_sq = 0.0;
         *unresolved = 0.0;
         *unresolved_step = 0.0;
