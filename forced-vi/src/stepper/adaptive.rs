@@ -67,6 +67,11 @@ pub(super) struct Pending {
     residual: f64,
 }
 
+/// What one attempt of an adaptive step gives: the step's residual, its error estimate per
+/// unit step over the tolerance, and for a pair (see [`crate::control`], "Pairs") the
+/// second step's Newton iterations and residual.
+type Attempted = (f64, f64, Option<(usize, f64)>);
+
 impl PairFirst {
     fn new(n: usize, unknowns: usize) -> Self {
         PairFirst {
@@ -380,7 +385,7 @@ impl<M: ForcedLagrangian<N>, const N: usize> Stepper<'_, M, N> {
         within: f64,
         tol: &Tolerance<N>,
         iters: &mut usize,
-    ) -> Result<(f64, f64, Option<(usize, f64)>), StepFailure> {
+    ) -> Result<Attempted, StepFailure> {
         let res = self.attempt(h, iters)?;
         let (n, unknowns) = (N, self.backend.z().len());
         let first = self
