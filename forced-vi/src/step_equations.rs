@@ -391,22 +391,26 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
     fn group_max(&self, out: &mut [f64]) {
         let nz = (self.scheme.stages() - 1) * N;
         let len = nz.min(out.len());
-        let grad = &mut out[..len];
-        // The largest of each coordinate gathered into the first block, then copied to the
-        // others (by blocks of `N`: strided iterators cost several times the instructions).
-        let (first, rest) = grad.split_at_mut(N.min(len));
+        // The largest of each coordinate gathered into an `[f64; N]`, then written to every
+        // block: by blocks of `N` as arrays, whose copies are a few moves (strided iterators
+        // cost several times the instructions, and a slice's `copy_from_slice` a call to
+        // `memcpy`: 96 instructions a call on coupled van der Pol, lobatto3, against 45).
+        let (blocks, tail) = out[..len].as_chunks_mut::<N>();
         // A NaN entry counts as nothing, as in a fold with `f64::max`.
-        first
-            .iter_mut()
-            .for_each(|m| *m = if *m > 0.0 { *m } else { 0.0 });
-        for block in rest.chunks_exact(N) {
-            for (m, x) in first.iter_mut().zip(block) {
+        let clamp = |m: f64| if m > 0.0 { m } else { 0.0 };
+        let Some((first, rest)) = blocks.split_first_mut() else {
+            // Fewer rows than one block: each its own.
+            tail.iter_mut().for_each(|m| *m = clamp(*m));
+            return;
+        };
+        let mut most = first.map(clamp);
+        for block in rest.iter() {
+            for (m, x) in most.iter_mut().zip(block) {
                 *m = if *x > *m { *x } else { *m };
             }
         }
-        for block in rest.chunks_exact_mut(N) {
-            block.copy_from_slice(first);
-        }
+        *first = most;
+        rest.iter_mut().for_each(|block| *block = most);
     }
 
     /// Each coordinate's gradient rows get its own scale, the constraint rows the step's
