@@ -113,13 +113,14 @@ pub trait Scene: Send + Sync {
     /// the automatic first step ([`Integrator::adaptive`]).
     fn run_adaptive(&self, scheme: &Scheme, tol: f64, member: usize)
         -> Result<Outcome, SceneError>;
-    /// The same with the error estimated over pairs of steps
-    /// ([`Integrator::paired_estimates`]).
-    fn run_adaptive_paired(
+    /// The same with the error estimated over pairs of steps or not, as `paired` says
+    /// ([`Integrator::paired_estimates`]; by default a run takes them on the dense path).
+    fn run_adaptive_pairs(
         &self,
         scheme: &Scheme,
         tol: f64,
         member: usize,
+        paired: bool,
     ) -> Result<Outcome, SceneError>;
     /// Times a variational run of member 0 to the final time (`adaptive`: at
     /// `rtol = atol = h_or_tol` from the automatic first step; else fixed steps of
@@ -365,14 +366,15 @@ where
         self.run_with(integ, member)
     }
 
-    fn run_adaptive_paired(
+    fn run_adaptive_pairs(
         &self,
         scheme: &Scheme,
         tol: f64,
         member: usize,
+        paired: bool,
     ) -> Result<Outcome, SceneError> {
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
-        self.run_with(integ.paired_estimates(true), member)
+        self.run_with(integ.paired_estimates(paired), member)
     }
     fn time_restarted(
         &self,

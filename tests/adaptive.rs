@@ -185,7 +185,8 @@ fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto4() {
 }
 
 /// One scheme of the proportionality sweep (a test per scheme, so that the test threads
-/// share the sweep).
+/// share the sweep), with one estimate per step. The report's scenes take the dense path,
+/// where a run's default is pairs: the `adaptive_paired_` tests above check it.
 fn proportionality(s: usize) {
     proportionality_with(s, false);
 }
@@ -222,11 +223,9 @@ fn proportionality_with(s: usize, paired: bool) {
                 _ => 0.0,
             };
             for &tol in tols.iter().filter(|&&t| t >= floor) {
-                let out = match paired {
-                    true => scene.run_adaptive_paired(&scheme, tol, 0),
-                    false => scene.run_adaptive(&scheme, tol, 0),
-                }
-                .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
+                let out = scene
+                    .run_adaptive_pairs(&scheme, tol, 0, paired)
+                    .unwrap_or_else(|e| panic!("{} lobatto{s} tol {tol:e}: {e}", scene.name()));
                 // The tolerance applies to positions and momenta alike.
                 let err = (out.end.q.iter().zip(&reference.q))
                     .chain(out.end.p.iter().zip(&reference.p))

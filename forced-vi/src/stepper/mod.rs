@@ -76,8 +76,9 @@ pub struct StepOptions {
     /// Adaptive runs: the smallest step other than the last one (default 0).
     pub min_step: f64,
     /// Adaptive runs: estimate the local error once over two steps where that is sound
-    /// (default off; see [`Integrator::paired_estimates`](crate::Integrator::paired_estimates)).
-    pub paired_estimates: bool,
+    /// (`None`, the default: on the dense path, off on the sparse one; see
+    /// [`Integrator::paired_estimates`](crate::Integrator::paired_estimates)).
+    pub paired_estimates: Option<bool>,
 }
 
 impl StepOptions {
@@ -114,7 +115,7 @@ impl Default for StepOptions {
             max_steps: Self::DEFAULT_MAX_STEPS,
             max_step: f64::INFINITY,
             min_step: 0.0,
-            paired_estimates: false,
+            paired_estimates: None,
         }
     }
 }

@@ -104,8 +104,8 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
         let mut pair_lift: (&[f64], &[bool]) = (&[], &[]);
         if reference.is_some() {
             // Pairs (see `crate::control`): their reference's tables, also for the steps
-            // taken alone.
-            let paired = setup.options.paired_estimates;
+            // taken alone (the integrator has resolved the default).
+            let paired = setup.options.paired_estimates == Some(true);
             let e = match paired {
                 true => scheme.pair_estimate_tables(),
                 false => scheme.estimate_tables(),
