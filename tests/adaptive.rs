@@ -168,7 +168,7 @@ fn adaptive_tolerance_proportionality_on_the_report_scenes_lobatto5() {
 }
 
 /// The same with the error estimated over pairs of steps ([`Integrator::paired_estimates`]),
-/// which lobatto2–4 take.
+/// which lobatto2 and lobatto3 take.
 #[test]
 fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto2() {
     proportionality_with(2, true);
@@ -177,11 +177,6 @@ fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto2() {
 #[test]
 fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto3() {
     proportionality_with(3, true);
-}
-
-#[test]
-fn adaptive_paired_tolerance_proportionality_on_the_report_scenes_lobatto4() {
-    proportionality_with(4, true);
 }
 
 /// One scheme of the proportionality sweep (a test per scheme, so that the test threads

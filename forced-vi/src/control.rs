@@ -83,14 +83,26 @@
 //! and the two steps are accepted or retried together; the second is handed out at the
 //! next call. The argument above holds over `2h` (the lift is off by `O(h^{s+1})` in the
 //! control points, one iteration leaves `O(h^{2s+1})`), and the estimate costs half as
-//! much per step. Taken by lobatto2–4 and the midpoint scheme only (lobatto5 gained
-//! nothing, −1 % to +10 % instructions, and lobatto7's proportionality slopes on held-out
-//! models fell to 0.71 and rose to 1.20), away from output times, the last steps of a run,
+//! much per step. Taken by lobatto2, lobatto3 and the midpoint scheme only, away from
+//! output times, the last steps of a run,
 //! a step after a rejection, constraints, tangents and tapes, and steps that do not
 //! resolve the model's fastest rates. Not by default on the sparse path: on the FPU chain
 //! at n = 1024 (callgrind, whole runs of lobatto3 to T = 100) pairs took 600M instructions
 //! against 723M at tol 1e-6, but 993M against 750M at 1e-8 (66 steps against 60), where
 //! lobatto5's reference system of `4n` unknowns costs more than the estimates saved.
+//!
+//! *Why not lobatto4 and up.* The argument needs the reference's own error over `2h`,
+//! `C' (2h)^{p+3}`, far below the pair's `2 C h^{p+1}`: their ratio is `2^{p+2} (C'/C) h²`
+//! where a single step's is `(C'/C) h²`, 256 times more for lobatto4 (order 6, reference
+//! lobatto5). At the large steps of high orders, near a close encounter, that margin is
+//! gone: on a Lennard-Jones pair in the plane (the fourth held-out set of
+//! `examples/tolerance_sweep.rs`, T = 30), lobatto4 with pairs ended 6.0, 6.7, 17.2 and 21.0
+//! times the tolerance off at tol 1e-3 to 1e-6 (its flow amplifies errors about 100-fold),
+//! against 2.3, 2.0, 2.6 and 3.2 with one estimate per step, and took 5 to 20 % more
+//! steps. lobatto3 pairs, against lobatto5 (four orders above them), ended 2.3 to 2.96
+//! times off there, against 1.8 to 2.8. lobatto5 gained nothing from pairs (−1 % to +10 %
+//! instructions), and lobatto7's proportionality slopes on held-out models fell to 0.71 and
+//! rose to 1.20.
 //!
 //! *The reference of lobatto3 pairs is lobatto5.* Across a jump of the force (Coulomb
 //! friction at a reversal of the velocity), a step and its reference integrate a step
@@ -106,12 +118,9 @@
 //!
 //! Measured (callgrind, whole runs, against one estimate per step): lobatto3 at tol 1e-6
 //! to 1e-7 on the damped oscillator, coupled van der Pol, Kepler with drag and the double
-//! pendulum −19 %, −17 %, −17 %, −13 % instructions; lobatto4 on the damped oscillator
-//! (1e-8), Kepler (1e-9), the double pendulum (1e-9) −21 %, −12 %, −17 %; lobatto2 on
-//! coupled van der Pol (1e-6) −28 %; steps −7 % to +5 %. On the van der Pol oscillator at
-//! μ = 10⁶ lobatto2–4 end in `StepSizeTooSmall` at tol 1 to 1e-6 (a typed error), as
-//! without pairs, except lobatto4 at tol 1, which ends `Ok` without them and not with
-//! them.
+//! pendulum −19 %, −17 %, −17 %, −13 % instructions; lobatto2 on coupled van der Pol
+//! (1e-6) −28 %; steps −7 % to +5 %. On the van der Pol oscillator at μ = 10⁶ lobatto2 and
+//! lobatto3 end in `StepSizeTooSmall` at tol 1 to 1e-6 (a typed error), as without pairs.
 //!
 //! **Newton's stop.** A fixed step is solved to round-off. An adaptive step needs its
 //! iterate only to a small share of its own error: the estimate above compares the step

@@ -113,7 +113,7 @@ impl<'a, M: ForcedLagrangian<N>, const N: usize> Stepper<'a, M, N> {
             lift = &e.lift;
             if model.constraint_count() == 0 {
                 block_weights = &e.block_weights;
-                if paired && scheme.stages() <= 4 {
+                if paired && scheme.stages() <= 3 {
                     pair_lift = (&e.pair_lift, &e.pair_second);
                 }
             } else {
