@@ -223,20 +223,16 @@ impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
         }
         true
     }
-}
 
-impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
-    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
-        self.nodes(z);
+    /// The gradient rows of the residual from the node gradients in `grads`, and the
+    /// constraint rows.
+    #[inline(always)]
+    fn residual_rows(
+        &mut self,
+        z: &DVector<f64>,
+        r: &mut DVector<f64>,
+    ) -> Result<(), NewtonFailure> {
         let (sch, h) = (self.scheme, self.h);
-        for i in 0..sch.quadrature_nodes() {
-            let t = self.t0 + sch.c()[i] * h;
-            let g = self.model.node_gradient_at(t, &self.xs[i], &self.vs[i]);
-            if !(all_finite(&g.fq) && all_finite(&g.lv)) {
-                return Err(NewtonFailure::NonFinite);
-            }
-            self.grads[i] = g;
-        }
         let (rs, _) = r.as_mut_slice().as_chunks_mut::<N>();
         let unrolled = match sch.quadrature_nodes() {
             2 => self.rows_unrolled::<2>(rs),
@@ -270,19 +266,24 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
         Ok(())
     }
 
-    fn jacobian(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
-        self.nodes(z);
+    /// The node blocks at the node values into `jacs`, and with `grads` their gradient
+    /// blocks into `grads` (the residual's terms at the same point).
+    fn node_blocks(&mut self, grads: bool) -> Result<(), NewtonFailure> {
         let (sch, h) = (self.scheme, self.h);
-        let evaluated = if self.blocks_given {
-            0
-        } else {
-            sch.quadrature_nodes()
-        };
-        for i in 0..evaluated {
+        for i in 0..sch.quadrature_nodes() {
             let t = self.t0 + sch.c()[i] * h;
             let nj = self.model.node_jacobian_at(t, &self.xs[i], &self.vs[i]);
             if !(all_finite(&nj.a) && all_finite(&nj.b) && all_finite(&nj.c) && all_finite(&nj.e)) {
                 return Err(NewtonFailure::NonFinite);
+            }
+            if grads {
+                let g = nj.grad;
+                if !(all_finite(&g.fq) && all_finite(&g.lv)) {
+                    return Err(NewtonFailure::NonFinite);
+                }
+                if let Some(slot) = self.grads.get_mut(i) {
+                    *slot = g;
+                }
             }
             // Filled on the first Jacobian (capacity made once): a zero `N × N` block made
             // beforehand would sit on the caller's stack.
@@ -291,6 +292,13 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
                 None => self.jacs.push(nj),
             }
         }
+        Ok(())
+    }
+
+    /// The Jacobian from the node blocks in `jacs`, with the forces' round-off
+    /// ([`NonlinearSystem::residual_noise`]) and the constraint rows.
+    fn assemble(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        let (sch, h) = (self.scheme, self.h);
         // `h |A| |x|` ([`crate::newton::force_round_off`]) and the same per row, in one pass
         // over the blocks `A`. In place: an `N × N` temporary would sit on the stack. The
         // first node sets the rows (a fill with zeros before it, read back at another width,
@@ -376,6 +384,50 @@ impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_,
             self.constraint_rows(z, &mut scratch, Some(jac))?;
         }
         Ok(())
+    }
+}
+
+impl<M: ForcedLagrangian<N>, const N: usize> NonlinearSystem for StepProblem<'_, M, N> {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        let (sch, h) = (self.scheme, self.h);
+        for i in 0..sch.quadrature_nodes() {
+            let t = self.t0 + sch.c()[i] * h;
+            let g = self.model.node_gradient_at(t, &self.xs[i], &self.vs[i]);
+            if !(all_finite(&g.fq) && all_finite(&g.lv)) {
+                return Err(NewtonFailure::NonFinite);
+            }
+            self.grads[i] = g;
+        }
+        self.residual_rows(z, r)
+    }
+
+    /// Both at one `z` from one pass of the Jacobian kernel, whose gradient blocks are the
+    /// residual's terms: a step's first iterate takes its residual and its factors at the
+    /// same point (every fixed step of a small model, every adaptive step), and the
+    /// gradient kernel is not run there.
+    fn residual_and_jacobian(
+        &mut self,
+        z: &DVector<f64>,
+        r: &mut DVector<f64>,
+        jac: &mut DMatrix<f64>,
+    ) -> Result<(), NewtonFailure> {
+        if self.blocks_given {
+            self.residual(z, r)?;
+            return self.jacobian(z, jac);
+        }
+        self.nodes(z);
+        self.node_blocks(true)?;
+        self.residual_rows(z, r)?;
+        self.assemble(z, jac)
+    }
+
+    fn jacobian(&mut self, z: &DVector<f64>, jac: &mut DMatrix<f64>) -> Result<(), NewtonFailure> {
+        self.nodes(z);
+        if !self.blocks_given {
+            self.node_blocks(false)?;
+        }
+        self.assemble(z, jac)
     }
 
     fn residual_noise(&self) -> f64 {

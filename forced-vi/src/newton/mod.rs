@@ -36,6 +36,20 @@ pub trait NonlinearSystem {
     /// The Jacobian `∂R/∂z` at `z`.
     fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), NewtonFailure>;
 
+    /// [`NonlinearSystem::residual`] then [`NonlinearSystem::jacobian`] at the same `z`
+    /// (the default): a system whose Jacobian's evaluation gives the residual's terms too
+    /// makes both in one pass. The iteration asks for it where a solve makes fresh factors
+    /// at its guess.
+    fn residual_and_jacobian(
+        &mut self,
+        z: &DVector<f64>,
+        r: &mut DVector<f64>,
+        j: &mut DMatrix<f64>,
+    ) -> Result<(), NewtonFailure> {
+        self.residual(z, r)?;
+        self.jacobian(z, j)
+    }
+
     /// The round-off of the residual that does not shrink with `z`, as of the last
     /// [`NonlinearSystem::jacobian`]: it widens the round-off floor of [`Newton::solve`]
     /// (default 0). For a step's equations it is `h |A| |x|`, the forces' round-off at
@@ -241,6 +255,23 @@ impl<S: NonlinearSystem + ?Sized> LinearSolver<S> for DenseLinear {
     #[inline]
     fn refresh(&mut self, sys: &mut S, z: &DVector<f64>) -> Result<f64, NewtonFailure> {
         sys.jacobian(z, &mut self.jac)?;
+        self.lu.factor(&self.jac)?;
+        Ok(self.scan_rows())
+    }
+
+    #[inline]
+    fn refresh_with_residual(
+        &mut self,
+        sys: &mut S,
+        z: &DVector<f64>,
+        r: &mut DVector<f64>,
+    ) -> Result<f64, NewtonFailure> {
+        sys.residual_and_jacobian(z, r, &mut self.jac)?;
+        // A residual that is not finite is reported as such, before the factorisation of
+        // its Jacobian could call it singular.
+        if !r.iter().all(|x| x.is_finite()) {
+            return Err(NewtonFailure::NonFinite);
+        }
         self.lu.factor(&self.jac)?;
         Ok(self.scan_rows())
     }
