@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
+use crate::buffers::{zero_matrix, zeros};
 use crate::error::NewtonFailure;
 use crate::model::{ForcedLagrangian, NodeGradient, NodeJacobian};
 use crate::newton::NonlinearSystem;
@@ -58,6 +59,45 @@ pub(crate) struct StepProblem<'a, M, const N: usize> {
     /// Newton asks for, takes the node values as they are.
     pub(crate) nodes_z: Vec<f64>,
     pub(crate) nodes_valid: bool,
+}
+
+impl<'a, M: ForcedLagrangian<N>, const N: usize> StepProblem<'a, M, N> {
+    /// The buffers for `model` and `scheme`, no step set (`h` is NaN until a solve sets it).
+    pub(crate) fn new(model: &'a M, scheme: &'a Scheme) -> Self {
+        let (s, r) = (scheme.stages(), scheme.quadrature_nodes());
+        let cons = model.constraint_count();
+        let dim = (s - 1) * (N + cons);
+        let zero = SVector::<f64, N>::zeros();
+        let grad = NodeGradient { fq: zero, lv: zero };
+        StepProblem {
+            model,
+            scheme,
+            h: f64::NAN,
+            t0: 0.0,
+            q0: zero,
+            p0: zero,
+            xs: vec![zero; r],
+            vs: vec![zero; r],
+            grads: vec![grad; r],
+            jacs: Vec::with_capacity(r),
+            base: zero_matrix(dim, dim),
+            base_built: false,
+            cons,
+            gval: zeros(cons),
+            gjac: vec![zero_matrix(cons, N); s],
+            row_scale: vec![1.0; cons],
+            col_scale: vec![1.0; cons],
+            lam: zeros(cons),
+            blocks_given: false,
+            noise: 0.0,
+            noise_h: 0.0,
+            noise_rows: zeros(N),
+            scale: 0.0,
+            coord_scale: zeros(N),
+            nodes_z: Vec::with_capacity(dim),
+            nodes_valid: false,
+        }
+    }
 }
 
 impl<M: ForcedLagrangian<N>, const N: usize> StepProblem<'_, M, N> {
@@ -774,6 +814,97 @@ mod tests {
                 sch.id()
             );
         }
+    }
+
+    /// A driven model with a mass that depends on `q` (the general assembly), and one with a
+    /// constant mass and a force in `q` and `v` (the constant-mass assembly).
+    struct Driven;
+    impl crate::model::ForcedLagrangian<2> for Driven {
+        const STRUCTURE: crate::model::Structure = crate::model::Structure::GENERAL_DRIVEN;
+        fn lagrangian<D: crate::scalar::Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+            self.lagrangian_at(D::from(0.0), q, v)
+        }
+        fn lagrangian_at<D: crate::scalar::Scalar>(&self, t: D, q: &[D; 2], v: &[D; 2]) -> D {
+            let mass = q[0].cos() * q[0].cos() * 0.5 + 1.0;
+            mass * v[0] * v[0] * 0.5 + v[1] * v[1] * 0.5 + q[0].sin() * v[1] * t.cos()
+                - (q[1] / 3.0).exp()
+        }
+        fn force<D: crate::scalar::Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+            self.force_at(D::from(0.0), q, v)
+        }
+        fn force_at<D: crate::scalar::Scalar>(&self, t: D, q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+            [
+                -v[0] * 0.3 * (q[1] * q[1] + 1.0),
+                (t * 2.0).sin() * q[0] - v[1] * v[0],
+            ]
+        }
+    }
+    struct Steady;
+    impl crate::model::ForcedLagrangian<2> for Steady {
+        const STRUCTURE: crate::model::Structure = crate::model::Structure {
+            constant_mass: true,
+            ..crate::model::Structure::GENERAL
+        };
+        fn lagrangian<D: crate::scalar::Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> D {
+            (v[0] * v[0] + v[1] * v[1] * 2.0) * 0.5
+                + D::from(1.0) / (q[0] * q[0] + q[1] * q[1]).sqrt()
+        }
+        fn force<D: crate::scalar::Scalar>(&self, q: &[D; 2], v: &[D; 2]) -> [D; 2] {
+            [-v[0] * 0.1 * q[1], -v[1] * v[1] * 0.05]
+        }
+    }
+
+    /// Both at one guess, from one pass of the Jacobian kernel, against the residual and
+    /// the Jacobian made apart, for each scheme and both assemblies.
+    fn fused_matches<M: crate::model::ForcedLagrangian<2>>(model: &M) {
+        let schemes = (2..=7)
+            .map(|s| Scheme::lobatto(s).expect("scheme"))
+            .chain([Scheme::new(SchemeId::Midpoint).expect("scheme")]);
+        for sch in schemes {
+            let fresh = || {
+                let mut prob = StepProblem::new(model, &sch);
+                (prob.h, prob.t0) = (0.3, 1.7);
+                prob.q0 = SVector::from([0.8, 1.1]);
+                prob.p0 = SVector::from([-0.4, 0.6]);
+                prob
+            };
+            let n = (sch.stages() - 1) * 2;
+            let z = DVector::from_fn(n, |i, _| 0.05 * (i as f64 + 1.0).sin());
+            let (mut r1, mut j1) = (DVector::zeros(n), DMatrix::zeros(n, n));
+            let mut apart = fresh();
+            apart.residual(&z, &mut r1).expect("residual");
+            apart.jacobian(&z, &mut j1).expect("jacobian");
+            let (mut r2, mut j2) = (DVector::zeros(n), DMatrix::zeros(n, n));
+            let mut fused = fresh();
+            fused
+                .residual_and_jacobian(&z, &mut r2, &mut j2)
+                .expect("both");
+            let size = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let diff = |x: &[f64], y: &[f64]| {
+                x.iter()
+                    .zip(y)
+                    .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
+            };
+            let (rs, js) = (size(r1.as_slice()), size(j1.as_slice()));
+            assert!(rs > 0.1 && js > 0.1, "{:?}: empty", sch.id());
+            let (dr, dj) = (
+                diff(r1.as_slice(), r2.as_slice()),
+                diff(j1.as_slice(), j2.as_slice()),
+            );
+            assert!(
+                dr <= 16.0 * f64::EPSILON * rs,
+                "{:?}: residual {dr:e} of {rs:e}",
+                sch.id()
+            );
+            assert_eq!(dj, 0.0, "{:?}: Jacobian {dj:e} of {js:e}", sch.id());
+            assert_eq!(apart.noise, fused.noise, "{:?}: noise", sch.id());
+        }
+    }
+
+    #[test]
+    fn residual_and_jacobian_together_match_them_apart() {
+        fused_matches(&Driven);
+        fused_matches(&Steady);
     }
 
     /// The blocks summed on the stack give the term-by-term Jacobian, for schemes whose

@@ -1,7 +1,7 @@
 //! The dense backend: `N × N` node blocks from the model's node kernels, the step Jacobian
 //! of DESIGN §3 as a dense matrix, factored by LU with partial pivoting ([`crate::Newton`]).
 
-use crate::buffers::{zero_matrix, zero_vector, zeros};
+use crate::buffers::{zero_vector, zeros};
 use nalgebra::{DMatrix, DVector, SVector};
 
 use super::{Layout, StepBackend, StepFailure};
@@ -66,40 +66,10 @@ pub(crate) struct DenseBackend<'a, M, const N: usize> {
 impl<'a, M: ForcedLagrangian<N>, const N: usize> DenseBackend<'a, M, N> {
     /// Buffers for `model` and `scheme`.
     pub(crate) fn new(model: &'a M, scheme: &'a Scheme, newton: NewtonOptions) -> Self {
-        let (s, r) = (scheme.stages(), scheme.quadrature_nodes());
         let cons = model.constraint_count();
-        let dim = (s - 1) * (N + cons);
-        let zero = SVector::<f64, N>::zeros();
-        let grad = crate::model::NodeGradient { fq: zero, lv: zero };
+        let dim = (scheme.stages() - 1) * (N + cons);
         DenseBackend {
-            prob: StepProblem {
-                model,
-                scheme,
-                h: f64::NAN,
-                t0: 0.0,
-                q0: zero,
-                p0: zero,
-                xs: vec![zero; r],
-                vs: vec![zero; r],
-                grads: vec![grad; r],
-                jacs: Vec::with_capacity(r),
-                base: zero_matrix(dim, dim),
-                base_built: false,
-                cons,
-                gval: zeros(cons),
-                gjac: vec![zero_matrix(cons, N); s],
-                row_scale: vec![1.0; cons],
-                col_scale: vec![1.0; cons],
-                lam: zeros(cons),
-                blocks_given: false,
-                noise: 0.0,
-                noise_h: 0.0,
-                noise_rows: zeros(N),
-                scale: 0.0,
-                coord_scale: zeros(N),
-                nodes_z: Vec::with_capacity(dim),
-                nodes_valid: false,
-            },
+            prob: StepProblem::new(model, scheme),
             impulse: Vec::new(),
             mu: zeros(cons),
             rate: zeros(cons),
