@@ -122,6 +122,24 @@ pub trait Scene: Send + Sync {
         member: usize,
         paired: bool,
     ) -> Result<Outcome, SceneError>;
+    /// Runs a variational scheme on every member to the final time (fixed steps of `x`, or
+    /// adaptive at `rtol = atol = x` as [`Scene::run_adaptive`]), as an ensemble is run
+    /// with the library: [`Integrator::ensemble`], the members in parallel, each worker
+    /// restarting one stepper member to member. Outcomes in the members' order; the first
+    /// member's error if any fails. By default, member by member.
+    fn run_variational_members(
+        &self,
+        scheme: &Scheme,
+        x: f64,
+        adaptive: bool,
+    ) -> Result<Vec<Outcome>, SceneError> {
+        (0..self.members())
+            .map(|m| match adaptive {
+                true => self.run_adaptive(scheme, x, m),
+                false => self.run_variational(scheme, x, m),
+            })
+            .collect()
+    }
     /// Times a variational run of member 0 to the final time (`adaptive`: at
     /// `rtol = atol = h_or_tol` from the automatic first step; else fixed steps of
     /// `h_or_tol`) two ways, alternating over `rounds`: with a new integrator and stepper
@@ -375,6 +393,39 @@ where
     ) -> Result<Outcome, SceneError> {
         let integ = Integrator::adaptive(&self.model, scheme.clone(), tol, tol)?;
         self.run_with(integ.paired_estimates(paired), member)
+    }
+
+    fn run_variational_members(
+        &self,
+        scheme: &Scheme,
+        x: f64,
+        adaptive: bool,
+    ) -> Result<Vec<Outcome>, SceneError> {
+        let integ = match adaptive {
+            true => Integrator::adaptive(&self.model, scheme.clone(), x, x)?,
+            false => Integrator::new(&self.model, scheme.clone(), x)?,
+        };
+        let members: Vec<InitialState<N>> = self
+            .initial
+            .iter()
+            .map(|(q, v)| InitialState::from_velocity(*q, *v))
+            .collect();
+        integ
+            .ensemble(&members, self.t_final, output::Final)
+            .into_iter()
+            .map(|end| {
+                let end = end.map_err(|f| f.error)?;
+                Ok(Outcome {
+                    end: FinalState {
+                        q: end.q.as_slice().to_vec(),
+                        p: end.p.as_slice().to_vec(),
+                        energy: end.energy,
+                    },
+                    steps: end.stats.steps,
+                    newton_iterations: end.stats.newton_iterations,
+                })
+            })
+            .collect()
     }
     fn time_restarted(
         &self,

@@ -10,8 +10,10 @@
 //!   scene these are means over the members (`ensemble.csv` has the min and max too).
 //! - `seconds`: the median wall time of several repeats of the whole run ([`Plan::repeats`](crate::report::plan::Plan::repeats)
 //!   adapts the count to the run time); a variational run computes its final state alone
-//!   (`Integrator::final_state`), as a baseline run does. Ensemble members run in parallel with rayon, and the
-//!   time is the wall time of the whole ensemble; every other run is sequential, one at a time.
+//!   (`Integrator::final_state`), as a baseline run does. Ensemble members run in parallel with rayon (the
+//!   variational ones through `Integrator::ensemble`, one stepper per worker restarted member to
+//!   member), and the time is the wall time of the whole ensemble; every other run is
+//!   sequential, one at a time.
 //! - `steps`, `newton_iters`: totals over the run (over all members for the ensemble); for the
 //!   baselines, accepted steps and nonlinear-solver iterations (0 for explicit solvers).
 //!

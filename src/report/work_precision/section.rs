@@ -151,7 +151,9 @@ fn scenes_and_methods(i: &Inputs<'_>) -> String {
          in 30-digit arithmetic, or the exact solution), embedded in the binary. Errors are \
          max-norm errors at the final time; for the ensemble, means over the members, with \
          steps and Newton iterations summed over the members and the wall time of the whole \
-         ensemble run in parallel (rayon).\n\n\
+         ensemble run in parallel (rayon): the variational schemes through \
+         `Integrator::ensemble` (each worker restarts one stepper member to member, as a user's \
+         ensemble runs), the baselines with a new solver per member.\n\n\
          Timing: the median of repeated runs, repeated until about {} s of timing per point \
          (at most {} repeats), on a machine with {} hardware threads shared with other work, \
          so differences below about 30 % are noise. Every run, variational or baseline, \

@@ -97,10 +97,15 @@ fn run_members(
             forced_vi::SchemeError::Unknown(id.to_string()).into(),
         )),
     };
-    let out = if scene.members() == 1 {
-        one(0).map(|o| vec![o])
-    } else {
-        (0..scene.members()).into_par_iter().map(one).collect()
+    let out = match (method, scheme) {
+        _ if scene.members() == 1 => one(0).map(|o| vec![o]),
+        // An ensemble of variational runs as the library runs one (`Integrator::ensemble`:
+        // one stepper per worker, restarted member to member); a baseline builds its solver
+        // for each member.
+        (Method::Variational(_), Some(s)) => {
+            scene.run_variational_members(s, x, mode == Mode::Adaptive)
+        }
+        _ => (0..scene.members()).into_par_iter().map(one).collect(),
     };
     out.map_err(|e| e.to_string())
 }
