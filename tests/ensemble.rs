@@ -52,6 +52,45 @@ fn ensemble_paper_members_match_member_by_member_runs() {
     }
 }
 
+/// The report's ensemble path (`Scene::run_variational_members`, through
+/// `Integrator::ensemble`) gives each member's outcome of a run of its own, to the bit: fixed
+/// steps and adaptive ones, a paired scheme (lobatto3) and one that is not (lobatto5).
+#[test]
+fn ensemble_scene_path_matches_member_by_member_runs() {
+    let all = scenes::all().expect("scenes build");
+    let scene: &dyn Scene = all
+        .iter()
+        .find(|s| s.name() == "coupled_van_der_pol_ensemble")
+        .expect("the ensemble scene exists")
+        .as_ref();
+    for (s, x, adaptive) in [
+        (3, 0.05, false),
+        (5, 0.25, false),
+        (3, 1e-6, true),
+        (5, 1e-8, true),
+    ] {
+        let scheme = Scheme::lobatto(s).unwrap();
+        let together = scene.run_variational_members(&scheme, x, adaptive).unwrap();
+        assert_eq!(together.len(), scene.members());
+        for (m, t) in together.iter().enumerate() {
+            let alone = match adaptive {
+                true => scene.run_adaptive(&scheme, x, m),
+                false => scene.run_variational(&scheme, x, m),
+            }
+            .unwrap();
+            let what = format!("lobatto{s} at {x:e}, adaptive {adaptive}, member {m}");
+            assert_eq!(t.end.q, alone.end.q, "{what}");
+            assert_eq!(t.end.p, alone.end.p, "{what}");
+            assert_eq!(t.end.energy.to_bits(), alone.end.energy.to_bits(), "{what}");
+            assert_eq!(
+                (t.steps, t.newton_iterations),
+                (alone.steps, alone.newton_iterations),
+                "{what}"
+            );
+        }
+    }
+}
+
 #[test]
 fn ensemble_bad_member_gives_its_typed_error_and_the_others_run() {
     let (mut members, t_final) = paper_members();
