@@ -575,7 +575,8 @@ fn unforced_constrained_map_is_symplectic_on_the_constraints() {
 /// `NewtonFailed` (diverged, residual 6e-15) at step 19. Measured on 400 starts of the
 /// double pendulum near `double_case`'s (a quarter of them within 1e-5 of it, the rest
 /// within 15 %; 4800 runs of lobatto2–7 at h = 0.01, 0.02 and 0.04 on both backends): two
-/// such failures before the fix, none after. This runs the 133 starts at h = 0.02, lobatto5.
+/// such failures before the fix, none after. This runs the 134 starts at h = 0.02, lobatto5,
+/// on both backends.
 #[test]
 fn trust_newton_noise_below_the_floor_is_not_divergence() {
     let mut seed = 12345u64;
