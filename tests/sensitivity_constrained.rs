@@ -573,7 +573,7 @@ fn unforced_constrained_map_is_symplectic_on_the_constraints() {
 /// above the increments' round-off took corrections of noise, its residual rose three times
 /// far below the floor (2e-17 to 7e-17, the floor 1.4e-14), and the run ended in
 /// `NewtonFailed` (diverged, residual 6e-15) at step 19. Measured on 400 starts of the
-/// double pendulum near `double_case`'s (a quarter of them within 1e-5 of it, the rest
+/// double pendulum near `double_case`'s (half of them within 1e-5 of it, the rest
 /// within 15 %; 4800 runs of lobatto2–7 at h = 0.01, 0.02 and 0.04 on both backends): two
 /// such failures before the fix, none after. This runs the 134 starts at h = 0.02, lobatto5,
 /// on both backends.
