@@ -807,18 +807,26 @@ mod tests {
             let (mut grouped, mut terms) = (vec![0.0; rows * rows], vec![0.0; rows * rows]);
             add_grouped(&mut grouped, rows, sch, &jacs, h);
             add_terms(&mut terms, rows, sch, &jacs, h);
-            let size = terms.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-            let diff = grouped
-                .iter()
-                .zip(&terms)
-                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-            assert!(size > 1.0, "{:?}: empty Jacobian", sch.id());
-            assert!(
-                diff <= 64.0 * f64::EPSILON * size,
-                "{:?}, N = {N}, h = {h}: {diff:e} of {size:e}",
-                sch.id()
+            assert_same_jacobian(
+                &grouped,
+                &terms,
+                format!("{:?}, N = {N}, h = {h}", sch.id()),
             );
         }
+    }
+
+    /// `got` is the Jacobian `want` (not empty) to 64 ε of its largest entry.
+    fn assert_same_jacobian(got: &[f64], want: &[f64], what: String) {
+        let size = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let diff = got
+            .iter()
+            .zip(want)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(size > 1.0, "{what}: empty Jacobian");
+        assert!(
+            diff <= 64.0 * f64::EPSILON * size,
+            "{what}: {diff:e} of {size:e}"
+        );
     }
 
     /// A driven model with a mass that depends on `q` (the general assembly), and one with a
@@ -931,18 +939,7 @@ mod tests {
                 prob.jacobian(&z, &mut jac).expect("jacobian");
                 let mut terms = vec![0.0; n * n];
                 add_terms(&mut terms, n, &sch, &prob.jacs, h);
-                let size = terms.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-                let diff = jac
-                    .as_slice()
-                    .iter()
-                    .zip(&terms)
-                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-                assert!(size > 1.0, "{:?}: empty Jacobian", sch.id());
-                assert!(
-                    diff <= 64.0 * f64::EPSILON * size,
-                    "{:?}, h = {h}: {diff:e} of {size:e}",
-                    sch.id()
-                );
+                assert_same_jacobian(jac.as_slice(), &terms, format!("{:?}, h = {h}", sch.id()));
             }
         }
     }
